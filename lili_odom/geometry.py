@@ -1,0 +1,131 @@
+"""SE(3) helpers shared by the whole package, built on ``gtsam.Pose3``.
+
+Conventions (used everywhere in lili_odom):
+
+* Poses are 4x4 homogeneous float64 matrices. ``T_a_b`` maps points from frame ``b`` into ``a``.
+* Twists are 6-vectors in **our order** ``(v, w)`` = (translation [m], rotation [rad]).
+  GTSAM orders its tangent space ``(w, v)``; KISS-ICP/Sophus use ``(v, w)`` like us. The
+  conversion to GTSAM happens only inside this module.
+* ``exp(xi)`` / ``log(T)`` are the true SE(3) exponential and logarithm (``Pose3.Expmap`` /
+  ``Pose3.Logmap``), so ``T @ exp(xi)`` is a motion expressed in the body frame of ``T``.
+* A *scaled* twist multiplies the rotation part by a characteristic length ``L`` [m], so that
+  both halves are in metres and a Euclidean angle between twists is meaningful.
+"""
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+
+__all__ = [
+    "to_gtsam_order",
+    "from_gtsam_order",
+    "orthonormalize",
+    "is_valid_pose",
+    "exp",
+    "log",
+    "adjoint",
+    "scale_twist",
+    "unscale_twist",
+    "scaling_matrix",
+    "transform_points",
+    "pose3",
+    "matrix",
+]
+
+
+def to_gtsam_order(xi: np.ndarray) -> np.ndarray:
+    """(v, w) -> (w, v); works on a 6-vector or on the last axis of an array of twists."""
+    xi = np.asarray(xi, dtype=float)
+    return np.concatenate([xi[..., 3:6], xi[..., 0:3]], axis=-1)
+
+
+def from_gtsam_order(xi: np.ndarray) -> np.ndarray:
+    """(w, v) -> (v, w)."""
+    return to_gtsam_order(xi)  # the swap is its own inverse
+
+
+def is_valid_pose(T: np.ndarray, tol: float = 1e-6) -> bool:
+    """True when ``T`` is a finite 4x4 rigid transform (rotation orthonormal within ``tol``)."""
+    T = np.asarray(T)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        return False
+    R = T[:3, :3]
+    return (
+        np.allclose(R.T @ R, np.eye(3), atol=tol)
+        and abs(np.linalg.det(R) - 1.0) < tol
+        and np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=tol)
+    )
+
+
+def orthonormalize(T: np.ndarray) -> np.ndarray:
+    """Return ``T`` with its rotation projected onto SO(3) (SVD) and an exact last row.
+
+    Native code (Sophus inside KISS-ICP) aborts the process on a rotation that is off-orthogonal
+    by as little as 1e-9, so every pose handed to it goes through here first.
+
+    Raises:
+        ValueError: when ``T`` is not a finite 4x4 matrix or its rotation part is degenerate.
+    """
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise ValueError("pose must be a finite 4x4 matrix")
+    U, S, Vt = np.linalg.svd(T[:3, :3])
+    if S[-1] < 1e-6 * max(S[0], 1e-300):
+        raise ValueError("pose rotation is singular")
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    out = np.eye(4)
+    out[:3, :3] = U @ D @ Vt
+    out[:3, 3] = T[:3, 3]
+    return out
+
+
+def pose3(T: np.ndarray) -> gtsam.Pose3:
+    """4x4 matrix -> ``gtsam.Pose3`` (re-orthonormalised)."""
+    return gtsam.Pose3(orthonormalize(T))
+
+
+def matrix(P: gtsam.Pose3) -> np.ndarray:
+    """``gtsam.Pose3`` -> 4x4 float64 matrix."""
+    return np.asarray(P.matrix(), dtype=np.float64)
+
+
+def exp(xi: np.ndarray) -> np.ndarray:
+    """SE(3) exponential of a twist ``(v, w)`` -> 4x4 matrix."""
+    return matrix(gtsam.Pose3.Expmap(to_gtsam_order(xi)))
+
+
+def log(T: np.ndarray) -> np.ndarray:
+    """SE(3) logarithm of a 4x4 matrix -> twist ``(v, w)``."""
+    return from_gtsam_order(gtsam.Pose3.Logmap(pose3(T)))
+
+
+def adjoint(T: np.ndarray) -> np.ndarray:
+    """6x6 adjoint of ``T`` in our ``(v, w)`` order: ``T exp(xi) T^-1 = exp(Ad_T xi)``."""
+    A = np.asarray(pose3(T).AdjointMap())  # gtsam order (w, v)
+    P = np.block([[np.zeros((3, 3)), np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
+    return P @ A @ P
+
+
+def scaling_matrix(length: float) -> np.ndarray:
+    """Diagonal 6x6 ``S`` with ``S @ (v, w) = (v, L w)``."""
+    return np.diag([1.0, 1.0, 1.0, length, length, length])
+
+
+def scale_twist(xi: np.ndarray, length: float) -> np.ndarray:
+    """Plain twist(s) ``(v [m], w [rad])`` -> scaled ``(v, L w)`` [m]; last axis has size 6."""
+    xi = np.array(xi, dtype=float)
+    xi[..., 3:6] *= length
+    return xi
+
+
+def unscale_twist(xi: np.ndarray, length: float) -> np.ndarray:
+    """Scaled twist(s) ``(v, L w)`` -> plain ``(v, w)``."""
+    xi = np.array(xi, dtype=float)
+    xi[..., 3:6] /= length
+    return xi
+
+
+def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply the 4x4 ``T`` to an (N, 3) array of points."""
+    points = np.asarray(points, dtype=np.float64)
+    return points @ T[:3, :3].T + T[:3, 3]
