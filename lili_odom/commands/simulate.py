@@ -1,0 +1,30 @@
+"""``lili-odom simulate {shapes,tunnel}``: write the synthetic data sets."""
+from __future__ import annotations
+
+import argparse
+import importlib
+
+help = "write synthetic data: degenerate shape pairs, or Husky-in-a-tunnel rosbag2 mcap bags"
+
+_KINDS = {
+    "shapes": ("lili_odom.sim.shapes_cli", "shape pairs (reference + local scan) with true subspaces"),
+    "tunnel": ("lili_odom.sim.tunnel_cli", "a simulated OS1-128 / IMU / wheel odometry tunnel bag"),
+}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="kind", required=True, metavar="KIND")
+    for kind, (module_name, text) in _KINDS.items():
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            if exc.name == module_name:
+                continue
+            raise
+        p = sub.add_parser(kind, help=text, description=text)
+        module.add_arguments(p)
+        p.set_defaults(_kind_run=module.run)
+
+
+def run(args: argparse.Namespace) -> int:
+    return int(args._kind_run(args) or 0)
