@@ -1,0 +1,1 @@
+"""File input/output that knows nothing of ROS."""
