@@ -1,0 +1,90 @@
+"""LiLi pieces: perturbation sizing, PCA threshold, sparsification, and detection on a plane."""
+import numpy as np
+import pytest
+from scipy.stats import special_ortho_group
+
+from conftest import plane_pair
+from lili_odom import geometry as g
+from lili_odom.degeneracy.factory import reference_for_detection
+from lili_odom.degeneracy.lili import LiliConfig, LiliDetector, pca_subspace, perturbation_twists
+from lili_odom.degeneracy.sparsify import sparsify
+
+
+def test_perturbation_sizing_moves_median_point_k_minus_1_spacings():
+    s, L, k = 0.05, 4.0, 5
+    deltas = perturbation_twists(s, L, k, both_signs=True)
+    assert deltas.shape == (12, 6)
+    assert np.allclose(np.abs(deltas[:3]).max(axis=1), (k - 1) * s)
+    # a point at range L, perpendicular to the rotation axis, moves (k - 1) s
+    p = np.array([0.0, L, 0.0])
+    moved = g.transform_points(g.exp(deltas[3]), p[None])[0]
+    assert np.linalg.norm(moved - p) == pytest.approx((k - 1) * s, rel=1e-3)
+    assert np.allclose(deltas[6:], -deltas[:6])
+    assert perturbation_twists(s, L, k, both_signs=False).shape == (6, 6)
+
+
+def test_pca_threshold_counts_directions_relative_to_perturbation_size():
+    d = 0.2
+    rng = np.random.default_rng(0)
+    free = np.array([[d, 0, 0, 0, 0, 0], [-d, 0, 0, 0, 0, 0], [0, 0, 0, 0, d, 0], [0, 0, 0, 0, -d, 0]])
+    pulled_back = rng.normal(scale=0.01 * d, size=(8, 6))
+    w, basis = pca_subspace(np.vstack([free, pulled_back]), 2 * d * d, tau_pca=0.25)
+    assert basis.shape == (2, 6)
+    assert w[0] == pytest.approx(1.0, abs=0.01) and w[2] < 0.01
+    # the same twists in other units (mm) give the same eigenvalues: the threshold is unit-free
+    w_mm, _ = pca_subspace(1000 * np.vstack([free, pulled_back]), 2 * (1000 * d) ** 2, 0.25)
+    assert np.allclose(w, w_mm)
+
+
+def test_sparsify_recovers_axis_basis_from_rotated_mix():
+    E = np.eye(6)[[0, 1, 5]]  # x, y translation and z rotation: a plane z = const
+    R = special_ortho_group.rvs(3, random_state=4)
+    mixed = R @ E
+    out = sparsify(mixed)
+    assert np.allclose(np.abs(out), E, atol=1e-4)
+    # same row space
+    assert np.allclose(out.T @ out, E.T @ E, atol=1e-6)
+
+
+def test_sparsify_keeps_coupled_direction_intact():
+    u = np.array([[0.6, 0, 0, 0, 0.8, 0]])
+    assert np.allclose(sparsify(u), u)
+
+
+@pytest.mark.parametrize("rotated", [False, True])
+def test_lili_detects_plane_subspace(rotated, generic_rotation):
+    R = generic_rotation if rotated else np.eye(3)
+    ref, scan, T = plane_pair(seed=1, rotation=R)
+    rm = reference_for_detection(ref)
+    start = T @ g.exp([0.02, -0.02, 0.01, 0.005, -0.005, 0.01])
+    res = LiliDetector().detect(rm, scan, start)
+    assert res.ok, res.reason
+    assert res.dimension == 3
+    # in the scan body frame the plane's normal is z: the subspace is {x, y translation, z rotation}
+    truth = np.eye(6)[[0, 1, 5]]
+    P_true = truth.T @ truth
+    assert np.allclose(res.projector_scaled(), P_true, atol=0.05)
+    assert res.twists.shape == (12, 6) and res.kept.sum() >= 6
+    # the pose is the optimum: off-plane error removed (z and tilt), in-plane slide is free
+    assert abs((np.linalg.inv(T) @ res.pose)[2, 3]) < 0.01
+
+
+def test_lili_rejects_empty_scan_and_missing_correspondences():
+    ref, scan, T = plane_pair(seed=2)
+    rm = reference_for_detection(ref)
+    det = LiliDetector(LiliConfig())
+    res = det.detect(rm, scan[:5], T)
+    assert not res.ok and res.dimension == 0
+    far = T.copy()
+    far[:3, 3] += [0, 0, 100.0]
+    res = det.detect(rm, scan, far)
+    assert not res.ok and "correspondence" in res.reason
+    res = det.detect(rm, np.full((100, 3), np.nan), T)
+    assert not res.ok
+
+
+def test_lili_config_validation():
+    with pytest.raises(ValueError):
+        LiliConfig(k=1)
+    with pytest.raises(ValueError):
+        LiliConfig(tau_displacement=1.5)
