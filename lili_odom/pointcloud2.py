@@ -1,0 +1,461 @@
+"""``sensor_msgs/PointCloud2`` content <-> numpy, without ROS.
+
+The parser reads a cloud by its ``PointField`` list, so any layout works: the ouster-ros
+"original" layout (x, y, z float32 @ 0/4/8, intensity float32 @ 16, ``t`` uint32 ns @ 20,
+reflectivity/ring/ambient uint16 @ 24/26/28, ``range`` uint32 mm @ 32, point_step 48,
+organized 128 x 1024) as well as plain x, y, z[, intensity][, t/time/timestamp] clouds, any
+field datatype, either byte order, padded rows.
+
+The input is *duck-typed*: any object with the attributes ``fields`` (items with ``name``,
+``offset``, ``datatype``, ``count`` attributes, or ``(name, offset, datatype, count)`` tuples),
+``is_bigendian``, ``point_step``, ``row_step``, ``height``, ``width`` and ``data`` (bytes,
+bytearray, ``array.array`` as rclpy gives it, or a numpy uint8 array as rosbags gives it). A
+real message of either library therefore works directly; :class:`CloudContent` is the plain
+dataclass form used by tests and by :func:`encode_xyz_cloud`.
+
+Frames and units: points stay in the message's frame (``os_lidar`` for the Ouster) in metres.
+Per-point times are seconds relative to the message's ``header.stamp``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple, Sequence
+
+import numpy as np
+
+__all__ = [
+    "CloudFormatError",
+    "PointFieldSpec",
+    "CloudContent",
+    "ParseStats",
+    "ParsedCloud",
+    "DATATYPES",
+    "parse_cloud",
+    "encode_xyz_cloud",
+]
+
+# sensor_msgs/PointField datatype constants -> numpy base type (byte order applied later).
+DATATYPES: dict[int, np.dtype] = {
+    1: np.dtype(np.int8),  # INT8
+    2: np.dtype(np.uint8),  # UINT8
+    3: np.dtype(np.int16),  # INT16
+    4: np.dtype(np.uint16),  # UINT16
+    5: np.dtype(np.int32),  # INT32
+    6: np.dtype(np.uint32),  # UINT32
+    7: np.dtype(np.float32),  # FLOAT32
+    8: np.dtype(np.float64),  # FLOAT64
+}
+FLOAT32 = 7
+UINT32 = 6
+
+# Field names holding a per-point time, in order of preference.
+_TIME_FIELDS = ("t", "time", "timestamp")
+
+# Sanity limits that keep garbage headers from allocating absurd amounts of memory.
+_MAX_POINT_STEP = 1 << 16
+_MAX_POINTS = 1 << 26
+
+
+class CloudFormatError(ValueError):
+    """The PointCloud2 content is malformed or lacks what the parser needs."""
+
+
+class PointFieldSpec(NamedTuple):
+    """One ``sensor_msgs/PointField``: ``offset`` in bytes inside a point, ``count`` elements."""
+
+    name: str
+    offset: int
+    datatype: int
+    count: int = 1
+
+
+@dataclass
+class CloudContent:
+    """The parts of a ``sensor_msgs/PointCloud2`` the parser and encoder use (no header)."""
+
+    fields: list[PointFieldSpec]
+    is_bigendian: bool
+    point_step: int
+    row_step: int
+    height: int
+    width: int
+    data: bytes
+    is_dense: bool = False
+
+
+@dataclass
+class ParseStats:
+    """Point counts of one parse.
+
+    ``n_total`` = height * width; ``n_kept`` + every drop counter = ``n_total`` (each point is
+    counted once, under the first reason that applies, in the order listed here).
+    """
+
+    n_total: int = 0
+    n_nonfinite: int = 0  # NaN/Inf coordinates (ouster no-return pixels) or NaN time
+    n_zero_range: int = 0  # xyz == 0 or a range field == 0 (older ouster drivers)
+    n_too_close: int = 0  # norm(xyz) < min_range
+    n_too_far: int = 0  # norm(xyz) > max_range
+    n_kept: int = 0
+
+
+@dataclass
+class ParsedCloud:
+    """Valid points of one cloud.
+
+    Attributes:
+        xyz: (N, 3) float64 points [m] in the message frame.
+        times: (N,) float64 seconds relative to ``header.stamp``, or None when the cloud has no
+            time field.
+        intensity: (N,) float64 or None.
+        range: (N,) float64 raw ``range`` field (ouster: millimetres) or None.
+        ring: (N,) int64 ``ring`` field or None.
+        index: (N,) int64 flat index (row * width + column) of each kept point in the message.
+        time_field: name of the field the times came from ("" if none).
+        time_scale: factor applied to the raw time values (1e-9 for nanoseconds, 1 for seconds).
+        time_offset: seconds subtracted after scaling (non-zero only for absolute time stamps).
+        stats: drop counters.
+    """
+
+    xyz: np.ndarray
+    times: np.ndarray | None
+    intensity: np.ndarray | None
+    range: np.ndarray | None
+    ring: np.ndarray | None
+    index: np.ndarray
+    time_field: str = ""
+    time_scale: float = 1.0
+    time_offset: float = 0.0
+    stats: ParseStats = field(default_factory=ParseStats)
+
+    def __len__(self) -> int:
+        return int(self.xyz.shape[0])
+
+
+# --------------------------------------------------------------------------------------------
+# input normalisation
+
+
+def _as_int(value: Any, what: str) -> int:
+    try:
+        out = int(value)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise CloudFormatError(f"{what} is not an integer: {value!r}") from exc
+    if isinstance(value, float) and value != out:
+        raise CloudFormatError(f"{what} is not an integer: {value!r}")
+    return out
+
+
+def _field_specs(fields: Any) -> list[PointFieldSpec]:
+    if fields is None:
+        raise CloudFormatError("cloud has no fields")
+    out: list[PointFieldSpec] = []
+    try:
+        items = list(fields)
+    except TypeError as exc:
+        raise CloudFormatError("fields is not a sequence") from exc
+    for item in items:
+        if hasattr(item, "name"):
+            name, offset = item.name, item.offset
+            datatype, count = item.datatype, getattr(item, "count", 1)
+        else:
+            try:
+                parts = tuple(item)
+            except TypeError as exc:
+                raise CloudFormatError(f"bad field entry {item!r}") from exc
+            if len(parts) not in (3, 4):
+                raise CloudFormatError(f"bad field entry {item!r}")
+            name, offset, datatype = parts[:3]
+            count = parts[3] if len(parts) == 4 else 1
+        if not isinstance(name, str):
+            raise CloudFormatError(f"field name is not a string: {name!r}")
+        out.append(
+            PointFieldSpec(
+                name,
+                _as_int(offset, f"offset of field {name!r}"),
+                _as_int(datatype, f"datatype of field {name!r}"),
+                _as_int(count, f"count of field {name!r}"),
+            )
+        )
+    return out
+
+
+def _data_bytes(data: Any) -> np.ndarray:
+    """Any buffer-like payload -> 1-D uint8 view (no copy when possible)."""
+    if data is None:
+        raise CloudFormatError("cloud has no data")
+    if isinstance(data, np.ndarray):
+        arr = data
+        if arr.dtype != np.uint8:
+            if arr.dtype.kind in "iu" and arr.dtype.itemsize == 1:
+                arr = arr.view(np.uint8)
+            else:
+                raise CloudFormatError(f"data array has dtype {arr.dtype}, expected uint8")
+        return np.ascontiguousarray(arr.reshape(-1))
+    if isinstance(data, (list, tuple)):
+        try:
+            return np.asarray(data, dtype=np.uint8).reshape(-1)
+        except (ValueError, OverflowError, TypeError) as exc:
+            raise CloudFormatError("data list is not bytes") from exc
+    try:
+        view = memoryview(data)
+    except TypeError as exc:
+        raise CloudFormatError(f"data of type {type(data).__name__} is not a byte buffer") from exc
+    if view.itemsize != 1:
+        # array.array('B') has itemsize 1; anything wider is not a byte payload.
+        raise CloudFormatError("data buffer items are not bytes")
+    if not view.c_contiguous:
+        return np.frombuffer(view.tobytes(), dtype=np.uint8)
+    return np.frombuffer(view.cast("B"), dtype=np.uint8)
+
+
+def _validate(msg: Any) -> tuple[list[PointFieldSpec], bool, int, int, int, int, np.ndarray]:
+    """Check the layout; return (fields, big_endian, point_step, row_step, height, width, raw)."""
+    for attr in ("fields", "is_bigendian", "point_step", "row_step", "height", "width", "data"):
+        if not hasattr(msg, attr):
+            raise CloudFormatError(f"cloud lacks attribute {attr!r}")
+    fields = _field_specs(msg.fields)
+    big = bool(msg.is_bigendian)
+    point_step = _as_int(msg.point_step, "point_step")
+    row_step = _as_int(msg.row_step, "row_step")
+    height = _as_int(msg.height, "height")
+    width = _as_int(msg.width, "width")
+    raw = _data_bytes(msg.data)
+
+    if min(point_step, row_step, height, width) < 0:
+        raise CloudFormatError("negative point_step/row_step/height/width")
+    if point_step > _MAX_POINT_STEP:
+        raise CloudFormatError(f"point_step {point_step} is implausibly large")
+    if height * width > _MAX_POINTS:
+        raise CloudFormatError(f"{height} x {width} points is implausibly many")
+    n_points = height * width
+    if n_points > 0:
+        if point_step == 0:
+            raise CloudFormatError("point_step is 0 for a non-empty cloud")
+        if row_step < point_step * width:
+            raise CloudFormatError(
+                f"row_step {row_step} < point_step {point_step} * width {width}"
+            )
+    if raw.size != row_step * height:
+        raise CloudFormatError(
+            f"data length {raw.size} != row_step {row_step} * height {height}"
+        )
+    names = set()
+    for f in fields:
+        if f.datatype not in DATATYPES:
+            raise CloudFormatError(f"field {f.name!r} has unknown datatype {f.datatype}")
+        if f.offset < 0 or f.count < 0:
+            raise CloudFormatError(f"field {f.name!r} has a negative offset or count")
+        end = f.offset + DATATYPES[f.datatype].itemsize * f.count
+        if end > point_step:
+            raise CloudFormatError(
+                f"field {f.name!r} (offset {f.offset}, {f.count} x "
+                f"{DATATYPES[f.datatype].itemsize} B) overruns point_step {point_step}"
+            )
+        names.add(f.name)
+    for axis in ("x", "y", "z"):
+        if axis not in names:
+            raise CloudFormatError(f"cloud has no {axis!r} field")
+        spec = next(f for f in fields if f.name == axis)
+        if spec.count < 1:
+            raise CloudFormatError(f"field {axis!r} has count 0")
+    return fields, big, point_step, row_step, height, width, raw
+
+
+# --------------------------------------------------------------------------------------------
+# parsing
+
+
+def _read_field(records: np.ndarray, spec: PointFieldSpec, big: bool, point_step: int) -> np.ndarray:
+    """First element of one field of every point, as float64 (or int64 for integers)."""
+    base = DATATYPES[spec.datatype].newbyteorder(">" if big else "<")
+    dt = np.dtype({"names": ["v"], "formats": [base], "offsets": [spec.offset],
+                   "itemsize": point_step})
+    values = records.view(dt)["v"]
+    if base.kind == "f":
+        return values.astype(np.float64)
+    return values.astype(np.int64)
+
+
+def _find(fields: Sequence[PointFieldSpec], name: str) -> PointFieldSpec | None:
+    for f in fields:
+        if f.name == name and f.count >= 1:
+            return f
+    return None
+
+
+def _time_conversion(raw_t: np.ndarray, spec: PointFieldSpec, stamp: float | None
+                     ) -> tuple[float, float]:
+    """Decide (scale, offset) so that ``raw * scale - offset`` is seconds since the stamp.
+
+    Rules: integer fields are nanoseconds (ouster-ros ``t``). Floating fields are seconds
+    unless the values span more than 10 units or exceed 1e12 in magnitude (a scan never lasts
+    10 s, and no relative or absolute time in seconds reaches 1e12), in which case they are
+    nanoseconds. After scaling, values above 1e5 s are absolute times: the header stamp is
+    subtracted when given, otherwise the earliest point time (so times stay small and
+    monotonic, relative to the first point instead of the stamp).
+    """
+    finite = raw_t[np.isfinite(raw_t)]
+    if finite.size == 0:
+        return 1.0, 0.0
+    if DATATYPES[spec.datatype].kind in "iu":
+        scale = 1e-9
+    else:
+        span = float(finite.max() - finite.min())
+        scale = 1e-9 if (span > 10.0 or float(np.abs(finite).max()) > 1e12) else 1.0
+    scaled = finite * scale
+    if float(np.median(np.abs(scaled))) > 1e5:
+        offset = float(stamp) if stamp is not None and math.isfinite(stamp) else float(
+            scaled.min())
+        return scale, offset
+    return scale, 0.0
+
+
+def parse_cloud(
+    msg: Any,
+    *,
+    min_range: float = 0.0,
+    max_range: float = math.inf,
+    stamp: float | None = None,
+) -> ParsedCloud:
+    """Parse PointCloud2 content into valid points and per-point times.
+
+    Args:
+        msg: duck-typed cloud (see module docstring).
+        min_range: drop points closer than this to the sensor origin [m].
+        max_range: drop points farther than this [m].
+        stamp: the message's ``header.stamp`` in seconds; only needed for clouds whose time
+            field holds absolute times (otherwise times are already relative to the stamp).
+
+    Returns:
+        The kept points (NaN/Inf, zero-range and out-of-range points removed) with counters.
+
+    Raises:
+        CloudFormatError: missing x/y/z, inconsistent point_step/row_step/data length, a field
+            overrunning point_step, an unknown datatype, or a non-buffer payload.
+    """
+    fields, big, point_step, row_step, height, width, raw = _validate(msg)
+    n_total = height * width
+    stats = ParseStats(n_total=n_total)
+    t_spec = next((s for s in (_find(fields, n) for n in _TIME_FIELDS) if s is not None), None)
+    if n_total == 0:
+        def empty(name: str, dtype: Any) -> np.ndarray | None:
+            return None if _find(fields, name) is None else np.zeros(0, dtype)
+
+        return ParsedCloud(
+            np.zeros((0, 3)), None if t_spec is None else np.zeros(0), empty("intensity", float),
+            empty("range", float), empty("ring", np.int64), np.zeros(0, np.int64),
+            time_field=t_spec.name if t_spec is not None else "", stats=stats)
+
+    rows = raw.reshape(height, row_step)[:, : point_step * width]
+    records = np.ascontiguousarray(rows).reshape(n_total, point_step)
+    records = records.view(np.dtype((np.void, point_step))).reshape(n_total)
+
+    xyz = np.stack([_read_field(records, _find(fields, a), big, point_step) for a in "xyz"],
+                   axis=1).astype(np.float64)
+
+    times = None
+    scale, offset = 1.0, 0.0
+    if t_spec is not None:
+        raw_t = _read_field(records, t_spec, big, point_step).astype(np.float64)
+        scale, offset = _time_conversion(raw_t, t_spec, stamp)
+        times = raw_t * scale - offset
+
+    def optional(name: str) -> np.ndarray | None:
+        spec = _find(fields, name)
+        return None if spec is None else _read_field(records, spec, big, point_step)
+
+    intensity = optional("intensity")
+    rng = optional("range")
+    ring = optional("ring")
+
+    with np.errstate(invalid="ignore", over="ignore"):
+        finite = np.all(np.isfinite(xyz), axis=1)
+        if times is not None:
+            finite &= np.isfinite(times)
+        norm = np.full(n_total, np.nan)
+        norm[finite] = np.linalg.norm(xyz[finite], axis=1)
+        zero = finite & (norm == 0.0)
+        if rng is not None:
+            zero |= finite & (rng == 0)
+        rest = finite & ~zero
+        too_close = rest & (norm < min_range)
+        too_far = rest & (norm > max_range)
+        # a norm that overflowed to inf counts as too far
+        too_far |= rest & ~np.isfinite(norm)
+    keep = rest & ~too_close & ~too_far
+
+    stats.n_nonfinite = int(np.count_nonzero(~finite))
+    stats.n_zero_range = int(np.count_nonzero(zero))
+    stats.n_too_close = int(np.count_nonzero(too_close))
+    stats.n_too_far = int(np.count_nonzero(too_far & ~too_close))
+    stats.n_kept = int(np.count_nonzero(keep))
+
+    def sel(a: np.ndarray | None, dtype: Any) -> np.ndarray | None:
+        return None if a is None else np.asarray(a[keep], dtype=dtype)
+
+    return ParsedCloud(
+        xyz=xyz[keep],
+        times=sel(times, np.float64),
+        intensity=sel(intensity, np.float64),
+        range=sel(rng, np.float64),
+        ring=sel(ring, np.int64),
+        index=np.flatnonzero(keep).astype(np.int64),
+        time_field=t_spec.name if t_spec is not None else "",
+        time_scale=scale,
+        time_offset=offset,
+        stats=stats,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# encoding
+
+
+def encode_xyz_cloud(
+    xyz: np.ndarray,
+    times: np.ndarray | None = None,
+    intensity: np.ndarray | None = None,
+    *,
+    big_endian: bool = False,
+) -> CloudContent:
+    """Pack points into a plain unorganized cloud (height 1).
+
+    Layout: x, y, z float32 @ 0/4/8, then optional ``intensity`` float32, then optional
+    ``time`` float32 [s relative to the header stamp] — readable by rviz, PCL and
+    :func:`parse_cloud`. Copy the result's attributes into a ``sensor_msgs/PointCloud2``.
+
+    Args:
+        xyz: (N, 3) points [m].
+        times: optional (N,) per-point times [s].
+        intensity: optional (N,) intensities.
+        big_endian: byte order of the payload.
+    """
+    xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    n = xyz.shape[0]
+    names = ["x", "y", "z"]
+    columns = [xyz[:, 0], xyz[:, 1], xyz[:, 2]]
+    if intensity is not None:
+        names.append("intensity")
+        columns.append(np.asarray(intensity, dtype=np.float64).reshape(n))
+    if times is not None:
+        names.append("time")
+        columns.append(np.asarray(times, dtype=np.float64).reshape(n))
+    order = ">" if big_endian else "<"
+    dtype = np.dtype([(name, order + "f4") for name in names])
+    rec = np.empty(n, dtype=dtype)
+    for name, col in zip(names, columns):
+        rec[name] = col
+    fields = [PointFieldSpec(name, 4 * i, FLOAT32, 1) for i, name in enumerate(names)]
+    step = dtype.itemsize
+    return CloudContent(
+        fields=fields,
+        is_bigendian=big_endian,
+        point_step=step,
+        row_step=step * n,
+        height=1,
+        width=n,
+        data=rec.tobytes(),
+        is_dense=bool(np.all(np.isfinite(xyz))),
+    )
