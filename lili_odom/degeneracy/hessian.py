@@ -32,9 +32,11 @@ Two detectors
       searched, and it is rejected when the 5th neighbour is 1 m or farther;
     * a plane is fitted to the 5 neighbours and rejected when any of them lies more than 0.2 m
       from it;
-    * LIO-SAM's residual weight ``s = 1 - 0.9 |r| / sqrt(|p|)`` (``|p|`` = range of the scan point
-      in the sensor frame): rows are multiplied by ``s`` and the correspondence is dropped when
-      ``s <= 0.1`` (``ZhangConfig.lio_sam_weights`` switches the row weighting off);
+    * LIO-SAM's residual gate ``s = 1 - 0.9 |r| / sqrt(|p|)`` (``|p|`` = range of the scan point
+      in the sensor frame): the correspondence is dropped when ``s <= 0.1``. The rows of ``A``
+      are *unweighted* by default, as the product specification of the baseline asks
+      (``ZhangConfig.lio_sam_weights = True`` multiplies them by ``s`` as LIO-SAM's code does;
+      for inliers ``s`` is 0.9-1, so the two barely differ);
     * the parameterisation of ``LMOptimization``: world-frame translation increments and increments
       of the roll/pitch/yaw angles of ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (columns ordered
       ``(roll, pitch, yaw, tx, ty, tz)``), rotations in radians, points in metres;
@@ -380,7 +382,7 @@ class ZhangConfig:
     num_neighbors: int = 5
     max_neighbor_distance: float = 1.0
     max_plane_deviation: float = 0.2
-    lio_sam_weights: bool = True
+    lio_sam_weights: bool = False
     min_weight: float = 0.1
     min_correspondences: int = MIN_CORRESPONDENCES
     registration: RegistrationConfig = field(default_factory=_default_registration)
