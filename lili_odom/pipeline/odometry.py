@@ -1,0 +1,291 @@
+"""``OdometryPipeline``: one object turns IMU, wheel and LiDAR samples into fused odometry.
+
+It is what the rclpy node, the offline bag runner and the benchmarks all run, so what is
+measured offline is what runs on the robot. Per scan (``process_scan``):
+
+1. the cloud arrives parsed (``Scan``: points in ``os_lidar``, per-point times);
+2. the pose of base_link over the sweep is predicted from IMU preintegration (wheel odometry or
+   the last body twist without IMU) by the fusion estimator, never a constant-velocity guess;
+3. the sweep is deskewed with that predicted motion and registered to the local map
+   (KISS-ICP, ``ScanMatcher``);
+4. the selected detector (``lili`` | ``zhang`` | ``hessian`` | ``none``) finds the degenerate
+   subspace of that registration, reusing the ICP optimum;
+5. iSAM2 fuses IMU preintegration, the LiDAR increment with the degenerate directions removed
+   and the wheel increment only inside them (``FusionEstimator``);
+6. the local map is updated with the FUSED pose.
+
+Frames: the odometry frame is gravity-aligned at the first scan; poses are of base_link in it.
+Scan poses refer to the time of the scan's last point (KISS-ICP deskews to it).
+"""
+from __future__ import annotations
+
+import logging
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lili_odom import geometry
+from lili_odom.degeneracy.hessian import HessianConfig, HessianDetector, ZhangConfig, ZhangDetector
+from lili_odom.degeneracy.lili import LiliConfig, LiliDetector
+from lili_odom.degeneracy.result import DegeneracyResult
+from lili_odom.fusion.config import FusionConfig
+from lili_odom.fusion.estimator import FusionEstimator
+from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig
+from lili_odom.pipeline.types import ImuSample, OdometryOutput, Scan, WheelSample
+
+log = logging.getLogger(__name__)
+
+METHODS = ("lili", "zhang", "hessian", "none")
+
+
+@dataclass
+class PipelineConfig:
+    """Everything the pipeline needs (mirrored by ``config/lili_odom.yaml``).
+
+    Attributes:
+        method: degeneracy detector, one of ``METHODS``.
+        sweep_duration: sweep length [s] assumed for clouds without per-point times.
+        min_points: scans with fewer valid points are skipped (counted, warned).
+        max_backward_jump_s: a scan stamp this much older than the previous one is a clock
+            jump backwards (bag loop): the pipeline resets.
+        max_forward_gap_s: a gap longer than this between scans re-initialises the estimator
+            at the last fused pose instead of integrating the IMU over it.
+        detection_points: scan points handed to the detector (evenly thinned), 0 = all.
+        scan_matcher / fusion / lili / zhang / hessian: the stages' own configurations.
+    """
+
+    method: str = "lili"
+    sweep_duration: float = 0.1
+    min_points: int = 100
+    max_backward_jump_s: float = 0.05
+    max_forward_gap_s: float = 1.0
+    detection_points: int = 4000
+    scan_matcher: ScanMatcherConfig = field(default_factory=ScanMatcherConfig)
+    fusion: FusionConfig = field(default_factory=FusionConfig)
+    lili: LiliConfig = field(default_factory=LiliConfig)
+    zhang: ZhangConfig = field(default_factory=ZhangConfig)
+    hessian: HessianConfig = field(default_factory=HessianConfig)
+
+    def validate(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {', '.join(METHODS)}, got '{self.method}'")
+        if not self.sweep_duration > 0:
+            raise ValueError(f"sweep_duration must be > 0 s, got {self.sweep_duration}")
+        if self.min_points < 10:
+            raise ValueError(f"min_points must be >= 10, got {self.min_points}")
+        if not self.max_forward_gap_s > 0:
+            raise ValueError(f"max_forward_gap_s must be > 0, got {self.max_forward_gap_s}")
+        if self.detection_points < 0:
+            raise ValueError(f"detection_points must be >= 0, got {self.detection_points}")
+        self.scan_matcher.validate()
+
+
+def make_detector(config: PipelineConfig):
+    """The configured detector object, or None for ``none``."""
+    if config.method == "lili":
+        return LiliDetector(config.lili)
+    if config.method == "zhang":
+        return ZhangDetector(config.zhang)
+    if config.method == "hessian":
+        return HessianDetector(config.hessian)
+    return None
+
+
+def basis_in_base(result: DegeneracyResult, T_base_lidar: np.ndarray) -> np.ndarray:
+    """Plain unit twists (k, 6) of the degenerate subspace in base_link (``(v, w)``)."""
+    if result is None or result.dimension == 0:
+        return np.zeros((0, 6))
+    B = result.basis @ geometry.adjoint(T_base_lidar).T
+    return B / np.linalg.norm(B, axis=1, keepdims=True)
+
+
+class OdometryPipeline:
+    """Degeneracy-aware LiDAR-inertial-wheel odometry (pure Python; see module docstring)."""
+
+    def __init__(self, config: PipelineConfig | None = None):
+        self.config = config or PipelineConfig()
+        self.config.validate()
+        self.counters: Counter[str] = Counter()
+        self._detector = make_detector(self.config)
+        self._matcher = ScanMatcher(self.config.scan_matcher)
+        self._new_estimator()
+        self._last_stamp: float | None = None
+        self._last_output: OdometryOutput | None = None
+
+    # ------------------------------------------------------------------ set-up and inputs
+    def _new_estimator(self) -> None:
+        self.estimator = FusionEstimator(self.config.fusion)
+
+    @property
+    def T_base_lidar(self) -> np.ndarray:
+        return self.estimator.T_base_lidar
+
+    def set_extrinsics(self, T_base_lidar: np.ndarray, T_base_imu: np.ndarray) -> None:
+        """Replace the extrinsics (e.g. from ``/tf_static``); resets the estimator state."""
+        self.config.fusion.T_base_lidar = geometry.orthonormalize(T_base_lidar)
+        self.config.fusion.T_base_imu = geometry.orthonormalize(T_base_imu)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget map, state and buffers (clock jump backwards, new bag loop)."""
+        self._matcher.reset()
+        self._new_estimator()
+        self._last_stamp = None
+        self._last_output = None
+        self.counters["resets"] += 1
+
+    def add_imu(self, sample: ImuSample) -> None:
+        if not self.estimator.add_imu(sample.stamp, sample.linear_acceleration, sample.angular_velocity):
+            self.counters["imu_rejected"] += 1
+        else:
+            self.counters["imu"] += 1
+
+    def add_wheel(self, sample: WheelSample) -> None:
+        if sample.pose is None or not self.estimator.add_wheel(sample.stamp, sample.pose):
+            self.counters["wheel_rejected"] += 1
+        else:
+            self.counters["wheel"] += 1
+
+    def local_map_points(self) -> np.ndarray:
+        """(M, 3) local map in the odometry frame [m]."""
+        return self._matcher.map_points()
+
+    # ------------------------------------------------------------------ per scan
+    def _sweep_times(self, scan: Scan) -> tuple[np.ndarray, float, float]:
+        times = scan.times
+        if times is None or len(times) != len(scan.points) or not np.all(np.isfinite(times)):
+            # no per-point time: assume the sweep ends at the stamp's end of sweep, no deskew
+            return np.zeros(len(scan.points)), scan.stamp, scan.stamp
+        return times, scan.stamp + float(times.min()), scan.stamp + float(times.max())
+
+    def process_scan(self, scan: Scan) -> OdometryOutput | None:
+        """Run one scan through the pipeline; None when it was skipped (see ``counters``)."""
+        t_start = time.perf_counter()
+        timings: dict[str, float] = {}
+        warnings: list[str] = []
+        self.counters["scans"] += 1
+        points = np.asarray(scan.points, dtype=np.float64).reshape(-1, 3)
+        finite = np.all(np.isfinite(points), axis=1)
+        if not finite.all():
+            points = points[finite]
+            scan = Scan(scan.stamp, points, None if scan.times is None else scan.times[finite],
+                        scan.frame_id, scan.dropped + int((~finite).sum()))
+        if not np.isfinite(scan.stamp):
+            self.counters["skipped_bad_stamp"] += 1
+            return None
+        if len(points) < self.config.min_points:
+            self.counters["skipped_too_few_points"] += 1
+            log.warning("scan at %.3f skipped: %d valid points", scan.stamp, len(points))
+            return None
+        times, t_first, t_ref = self._sweep_times(scan)
+        if self._last_stamp is not None:
+            if t_ref < self._last_stamp - self.config.max_backward_jump_s:
+                log.warning("clock jumped back %.3f s: resetting", self._last_stamp - t_ref)
+                self.reset()
+                self.counters["clock_jumps_back"] += 1
+                warnings.append("clock jump backwards: pipeline reset")
+            elif t_ref <= self._last_stamp:
+                self.counters["skipped_stale_stamp"] += 1
+                return None
+            elif t_ref - self._last_stamp > self.config.max_forward_gap_s:
+                self.counters["forward_gaps"] += 1
+                warnings.append(f"{t_ref - self._last_stamp:.2f} s gap: re-initialised at the last pose")
+                last = self._last_output
+                self._new_estimator()
+                self.estimator.initialize(t_ref, pose=last.pose if last else None)
+                self._last_stamp = t_ref
+
+        est = self.estimator
+        first = not est.initialized
+        t0 = time.perf_counter()
+        T_bl = self.T_base_lidar
+        if first:
+            est.initialize(t_ref)
+            sweep_motion = np.eye(4)
+            guess = est.predict(t_ref) @ T_bl
+        else:
+            poses = est.predict_poses([t_first, t_ref])
+            L0, L1 = poses[0] @ T_bl, poses[1] @ T_bl
+            sweep_motion = np.linalg.inv(L0) @ L1
+            guess = L1
+        timings["predict"] = time.perf_counter() - t0
+
+        t0 = time.perf_counter()
+        frame, map_points, source = self._matcher.preprocess(points, times, sweep_motion)
+        timings["deskew"] = time.perf_counter() - t0
+        if len(source) < 10:
+            self.counters["skipped_too_few_points"] += 1
+            return None
+
+        t0 = time.perf_counter()
+        reg = self._matcher.register(source, guess)
+        timings["icp"] = time.perf_counter() - t0
+        if not reg.ok:
+            self.counters["icp_failures"] += 1
+            warnings.append(f"registration failed: {reg.reason}")
+
+        degeneracy = None
+        t0 = time.perf_counter()
+        if self._detector is not None and reg.ok and not first:
+            det_points = source
+            n = self.config.detection_points
+            if n and len(det_points) > n:
+                det_points = det_points[:: int(np.ceil(len(det_points) / n))]
+            degeneracy = self._detector.detect(self._matcher.reference, det_points, guess,
+                                               optimized_pose=reg.pose)
+            if not degeneracy.ok:
+                self.counters["detector_failures"] += 1
+                warnings.append(f"detector: {degeneracy.reason}")
+            elif degeneracy.degenerate:
+                self.counters["degenerate_scans"] += 1
+        timings["detector"] = time.perf_counter() - t0
+
+        t0 = time.perf_counter()
+        if first:
+            fused = est.last_output
+        else:
+            T_icp_base = reg.pose @ np.linalg.inv(T_bl) if reg.ok else None
+            fused = est.update(t_ref, T_icp_base, degeneracy)
+        timings["fusion"] = time.perf_counter() - t0
+        if fused is None:
+            self.counters["fusion_rejected"] += 1
+            return None
+        warnings += list(fused.notes)
+
+        t0 = time.perf_counter()
+        fused_lidar = fused.pose @ T_bl
+        self._matcher.update_map(map_points, fused_lidar, np.linalg.inv(guess) @ fused_lidar)
+        timings["map"] = time.perf_counter() - t0
+        timings["total"] = time.perf_counter() - t_start
+
+        twist = self._body_twist(fused)
+        out = OdometryOutput(
+            stamp=t_ref,
+            pose=fused.pose,
+            twist=twist,
+            covariance=fused.covariance,
+            degeneracy=degeneracy,
+            degenerate_basis=basis_in_base(degeneracy, T_bl) if degeneracy is not None else np.zeros((0, 6)),
+            icp_pose=reg.pose @ np.linalg.inv(T_bl),
+            timings=timings,
+            warnings=warnings,
+            details={"points": len(points), "source_points": len(source),
+                     "threshold": self._matcher.threshold, "used_wheel": fused.used_wheel,
+                     "used_imu": fused.used_imu},
+        )
+        self._last_stamp = t_ref
+        self._last_output = out
+        self.counters["processed"] += 1
+        return out
+
+    def _body_twist(self, fused) -> np.ndarray:
+        """(v, w) of base_link in base_link from the fused velocity and the pose change."""
+        R = fused.pose[:3, :3]
+        v = R.T @ np.asarray(fused.velocity, dtype=float)
+        w = np.zeros(3)
+        last = self._last_output
+        if last is not None and fused.t > last.stamp:
+            w = geometry.log(np.linalg.inv(last.pose) @ fused.pose)[3:] / (fused.t - last.stamp)
+        return np.concatenate([v, w])
