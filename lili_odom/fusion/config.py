@@ -1,0 +1,116 @@
+"""Configuration of the fusion estimator (dataclasses; SI units, 1-sigma values)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lili_odom.fusion.imu import ImuNoiseConfig
+from lili_odom.fusion.wheel import WheelNoiseConfig
+
+__all__ = ["LidarNoiseConfig", "FusionConfig", "ImuNoiseConfig", "WheelNoiseConfig"]
+
+
+@dataclass
+class LidarNoiseConfig:
+    """Noise of one scan-to-map registration increment, in the LiDAR body frame.
+
+    Attributes:
+        sigma_translation: [m] per axis.
+        sigma_rotation: [rad] per axis.
+        degenerate_epsilon: information kept along removed (degenerate) directions, relative
+            to the largest eigenvalue of the scaled LiDAR information; keeps the factor
+            positive definite while contributing (for the defaults) a ~20 m sigma.
+        restriction: ``"marginalize"`` (treat the degenerate components of the measurement
+            as unknown, Schur complement) or ``"project"`` (plain ``P Omega P``).
+        default_length: characteristic length L [m] used when no detector result is given.
+    """
+
+    sigma_translation: float = 0.02
+    sigma_rotation: float = 0.002
+    degenerate_epsilon: float = 1e-6
+    restriction: str = "marginalize"
+    default_length: float = 10.0
+
+    def information(self) -> np.ndarray:
+        """6x6 diagonal information ``(v, w)`` in the LiDAR body frame."""
+        return np.diag(
+            [self.sigma_translation**-2] * 3 + [self.sigma_rotation**-2] * 3
+        )
+
+
+def _default_T_base_lidar() -> np.ndarray:
+    # Ouster OS1 on a Husky: os_lidar is yawed 180 deg about z from os_sensor, 36.18 mm up.
+    # The base_link -> os_sensor mount is robot specific; config/*.yaml overrides this.
+    T = np.eye(4)
+    T[:3, :3] = np.diag([-1.0, -1.0, 1.0])
+    T[2, 3] = 0.03618
+    return T
+
+
+def _default_T_base_imu() -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = [0.006253, -0.011775, 0.007645]
+    return T
+
+
+@dataclass
+class FusionConfig:
+    """All parameters of :class:`lili_odom.fusion.estimator.FusionEstimator`.
+
+    Attributes:
+        imu: IMU noise and buffer limits.
+        wheel: wheel increment noise and buffer limits.
+        lidar: LiDAR increment noise and degenerate-direction handling.
+        T_base_lidar: 4x4 pose of ``os_lidar`` in ``base_link``.
+        T_base_imu: 4x4 pose of ``os_imu`` in ``base_link``.
+        use_imu: False ignores the IMU entirely (fallback motion model every step).
+        prior_sigma_translation: initial pose prior [m].
+        prior_sigma_rotation: initial pose prior [rad].
+        prior_sigma_velocity: initial velocity prior [m/s] when the robot was seen at rest.
+        prior_sigma_velocity_moving: initial velocity prior [m/s] otherwise.
+        gravity_align: align roll/pitch of the initial pose with gravity from the IMU samples
+            preceding the first stamp (only when no initial pose is given).
+        gravity_window_s: length of that IMU window [s].
+        estimate_gyro_bias_at_rest: start the gyro bias at the mean rate when at rest.
+        wheel_weak_scale: factor on the wheel information outside the degenerate subspace
+            (0 = wheels act only inside it, and not at all when nothing is degenerate).
+        no_imu_sigma_translation_per_s: fallback motion-model sigma [m per s of interval].
+        no_imu_sigma_rotation_per_s: fallback motion-model sigma [rad per s of interval].
+        no_imu_sigma_floor_translation: [m] floor of the fallback translation sigma.
+        no_imu_sigma_floor_rotation: [rad] floor of the fallback rotation sigma.
+        no_imu_sigma_velocity: loose prior on the velocity of a state without IMU [m/s].
+        max_interval_s: a gap between consecutive updates longer than this [s] is bridged by
+            the fallback motion model only (IMU integration over long gaps is meaningless).
+        reset_every: keyframes between graph resets (bounded memory): the graph is then
+            rebuilt from one prior holding the joint marginal of the newest pose, velocity
+            and bias (LIO-SAM style, but keeping the cross-correlations).
+        relinearize_threshold: iSAM2 relinearisation threshold.
+        extra_iterations: additional iSAM2 update() calls per update (helps large corrections).
+        history_size: fused keyframe poses kept for ``predict`` at past times.
+    """
+
+    imu: ImuNoiseConfig = field(default_factory=ImuNoiseConfig)
+    wheel: WheelNoiseConfig = field(default_factory=WheelNoiseConfig)
+    lidar: LidarNoiseConfig = field(default_factory=LidarNoiseConfig)
+    T_base_lidar: np.ndarray = field(default_factory=_default_T_base_lidar)
+    T_base_imu: np.ndarray = field(default_factory=_default_T_base_imu)
+    use_imu: bool = True
+    prior_sigma_translation: float = 1e-3
+    prior_sigma_rotation: float = 1e-3
+    prior_sigma_velocity: float = 0.05
+    prior_sigma_velocity_moving: float = 1.0
+    gravity_align: bool = True
+    gravity_window_s: float = 1.0
+    estimate_gyro_bias_at_rest: bool = True
+    wheel_weak_scale: float = 0.0
+    no_imu_sigma_translation_per_s: float = 1.0
+    no_imu_sigma_rotation_per_s: float = 0.5
+    no_imu_sigma_floor_translation: float = 0.05
+    no_imu_sigma_floor_rotation: float = 0.02
+    no_imu_sigma_velocity: float = 1.0
+    max_interval_s: float = 2.0
+    reset_every: int = 100
+    relinearize_threshold: float = 0.05
+    extra_iterations: int = 1
+    history_size: int = 50

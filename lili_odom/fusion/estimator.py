@@ -1,0 +1,680 @@
+"""Degeneracy-aware LiDAR-inertial-wheel fusion on an iSAM2 factor graph.
+
+States (one per LiDAR scan, at the scan's ``header.stamp``):
+
+* ``X(i)``: ``gtsam.Pose3`` of ``base_link`` in the odometry frame (gravity-aligned, z up).
+* ``V(i)``: velocity of ``base_link`` in the odometry frame [m/s].
+* ``B(i)``: ``imuBias.ConstantBias`` (accelerometer [m/s^2], gyro [rad/s]) in the IMU frame.
+
+Factors between consecutive states ``i-1 -> i``:
+
+* ``CombinedImuFactor`` from the IMU samples between the two stamps (IMU -> base_link extrinsic
+  as GTSAM ``body_P_sensor``; see :mod:`lili_odom.fusion.imu`).
+* LiDAR ``BetweenFactorPose3``. The caller passes the *absolute* scan-to-map registration result
+  ``T_icp`` (base_link in the odometry frame; the map is built from fused poses). The factor's
+  measurement is the relative pose against the previous **fused** pose,
+  ``Z = T_fused(i-1)^-1 T_icp``, i.e. the map-relative correction the registration made since
+  the last fused state. Its information is the LiDAR information with the detected degenerate
+  directions removed (:mod:`lili_odom.fusion.subspace`), plus a tiny epsilon there.
+  A relative factor (rather than an absolute prior on ``X(i)``) keeps the graph consistent when
+  earlier states are re-estimated and lets the fused history stay the reference of the map.
+* Wheel ``BetweenFactorPose3`` whose information lives only inside the degenerate subspace
+  (the paper's solution remapping, as a factor). Without degeneracy there is no wheel factor
+  unless ``wheel_weak_scale`` > 0.
+
+Error convention: GTSAM's ``BetweenFactorPose3`` error is ``Logmap(Z^-1 X(i-1)^-1 X(i))``, a
+twist in the body frame of ``X(i)``; all informations here are 6x6 in our ``(v, w)`` order in
+base_link and converted with the order permutation at the GTSAM boundary.
+
+Fallbacks:
+
+* No IMU samples covering an interval (or ``use_imu`` False, or a gap longer than
+  ``max_interval_s``): the IMU factor is replaced by a loose velocity prior at the motion
+  model's velocity and a bias random-walk ``BetweenFactorConstantBias``. The pose then rests on
+  the LiDAR factor outside the degenerate subspace and, inside it, on the wheel factor; without
+  wheels a loose constant-twist ``BetweenFactorPose3`` (the previous interval's body twist,
+  "velocity-free": it does not involve ``V``) takes the wheels' place, with its information
+  likewise restricted to the degenerate subspace so that a LiDAR/motion-model disagreement
+  elsewhere cannot leak into it. Without LiDAR, that subspace is everything.
+* No wheel data: LiDAR + IMU only; degenerate directions are then constrained only by IMU
+  preintegration and the covariance reports that.
+* Invalid LiDAR pose or degeneracy basis: the LiDAR factor is dropped (counted) and the
+  wheel factor, if any, gets its full information (nothing else observes those directions).
+* Any non-finite input is rejected with a counter; GTSAM exceptions are caught, the graph is
+  rebuilt from the last good state and the update is reported as rejected.
+
+Bounded graph: plain ``gtsam.ISAM2`` (QR factorisation — Cholesky hit "indeterminant
+system" after ~300 keyframes in our tests because the absolute pose information decays while
+the bias random-walk information is ~1e9) and every ``reset_every`` keyframes the graph is
+rebuilt from a single ``LinearContainerFactor`` holding the joint marginal information of the
+newest ``X, V, B`` (so cross-correlations survive, unlike per-variable priors).
+``IncrementalFixedLagSmoother`` exists in the wheel but has open marginalisation bugs for
+exactly this X/V/B chain (borglab/gtsam#1638), so it is not used.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Iterable
+
+import gtsam
+import numpy as np
+from gtsam.symbol_shorthand import B, V, X
+
+from lili_odom.fusion.config import FusionConfig
+from lili_odom.fusion.imu import (
+    ImuBuffer,
+    gravity_alignment,
+    integrate,
+    make_preintegration_params,
+)
+from lili_odom.fusion.subspace import split_information, sqrt_information
+from lili_odom.fusion.wheel import WheelBuffer, wheel_information
+from lili_odom.geometry import exp, log, matrix, orthonormalize
+
+__all__ = ["FusionEstimator", "FusionOutput", "FusionStats"]
+
+# (v, w) <-> (w, v) permutation for 6x6 matrices.
+_SWAP = np.block([[np.zeros((3, 3)), np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
+
+
+def _to_gtsam_matrix(m: np.ndarray) -> np.ndarray:
+    return _SWAP @ m @ _SWAP
+
+
+_from_gtsam_matrix = _to_gtsam_matrix
+
+
+def _noise_from_information(omega_vw: np.ndarray) -> gtsam.noiseModel.Base:
+    """GTSAM Gaussian noise model from a PSD information in (v, w) order.
+
+    ``Gaussian.Information`` runs an LLT that silently yields NaNs on a singular matrix, so the
+    square root is built from an eigendecomposition and made upper triangular by QR.
+    """
+    R = sqrt_information(_to_gtsam_matrix(omega_vw))
+    R = np.linalg.qr(R, mode="r")
+    return gtsam.noiseModel.Gaussian.SqrtInformation(np.asarray(R), False)
+
+
+def _finite(*arrays: Any) -> bool:
+    try:
+        return all(np.all(np.isfinite(np.asarray(a, dtype=float))) for a in arrays)
+    except (TypeError, ValueError):
+        return False
+
+
+def _as_pose(T: Any) -> np.ndarray | None:
+    """A valid 4x4 rigid transform or None (non-finite, wrong shape, far from SO(3))."""
+    try:
+        T = np.asarray(T, dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        return None
+    R = T[:3, :3]
+    if not np.allclose(R.T @ R, np.eye(3), atol=1e-3) or np.linalg.det(R) < 0.5:
+        return None
+    if not np.allclose(T[3], [0, 0, 0, 1], atol=1e-6):
+        return None
+    return orthonormalize(T)
+
+
+@dataclass
+class FusionOutput:
+    """Fused state at one LiDAR stamp.
+
+    Attributes:
+        t: stamp [s].
+        index: keyframe index i.
+        pose: 4x4 pose of base_link in the odometry frame.
+        velocity: (3,) velocity of base_link in the odometry frame [m/s].
+        accel_bias: (3,) accelerometer bias, IMU frame [m/s^2].
+        gyro_bias: (3,) gyro bias, IMU frame [rad/s].
+        covariance: 6x6 marginal covariance of the pose, order (v, w), base_link body frame
+            (perturbation ``pose @ exp(xi)``) [m^2, rad^2].
+        degenerate_dimension: dimension of the degenerate subspace used for this update.
+        used_lidar / used_imu / used_wheel: which measurements entered the update.
+        notes: human-readable remarks (fallbacks, rejected inputs).
+    """
+
+    t: float
+    index: int
+    pose: np.ndarray
+    velocity: np.ndarray
+    accel_bias: np.ndarray
+    gyro_bias: np.ndarray
+    covariance: np.ndarray
+    degenerate_dimension: int = 0
+    used_lidar: bool = False
+    used_imu: bool = False
+    used_wheel: bool = False
+    notes: list[str] = field(default_factory=list)
+
+
+@dataclass
+class FusionStats:
+    """Counters of everything the estimator rejected or worked around."""
+
+    n_updates: int = 0
+    n_rejected_stamp: int = 0
+    n_rejected_lidar: int = 0
+    n_rejected_basis: int = 0
+    n_rejected_lidar_information: int = 0
+    n_rejected_wheel: int = 0
+    n_no_imu: int = 0
+    n_no_wheel: int = 0
+    n_solver_failures: int = 0
+    n_resets: int = 0
+    n_reset_fallbacks: int = 0
+
+
+@dataclass
+class _State:
+    t: float
+    index: int
+    pose: gtsam.Pose3
+    velocity: np.ndarray
+    bias: gtsam.imuBias.ConstantBias
+    cov_gtsam: np.ndarray  # 6x6 pose marginal, GTSAM order
+
+
+class FusionEstimator:
+    """iSAM2 fusion of IMU preintegration, degeneracy-filtered LiDAR and wheel increments.
+
+    Typical use (all stamps are ``header.stamp`` in seconds)::
+
+        est = FusionEstimator(FusionConfig())
+        est.add_imu(t, acc, gyro)            # as IMU messages arrive (os_imu frame)
+        est.add_wheel(t, T_odom_base)        # as wheel odometry arrives
+        out0 = est.initialize(t_scan0)       # first scan: pose at which it enters the map
+        guess = est.predict(t_scan)          # ICP initial guess / deskewing
+        out = est.update(t_scan, T_icp, degeneracy_result)
+    """
+
+    def __init__(self, config: FusionConfig | None = None) -> None:
+        self.config = config or FusionConfig()
+        cfg = self.config
+        self.T_base_lidar = orthonormalize(cfg.T_base_lidar)
+        self.T_base_imu = orthonormalize(cfg.T_base_imu)
+        self.imu = ImuBuffer(cfg.imu.buffer_seconds)
+        self.wheels = WheelBuffer(cfg.wheel)
+        self.stats = FusionStats()
+        self._params = make_preintegration_params(cfg.imu, self.T_base_imu)
+        self._isam: gtsam.ISAM2 | None = None
+        self._state: _State | None = None
+        self._since_reset = 0
+        self._history: deque[tuple[float, np.ndarray]] = deque(maxlen=max(2, cfg.history_size))
+        self._body_rate = np.zeros(6)  # (v, w) per second, base_link, previous interval
+        self.last_output: FusionOutput | None = None
+
+    # ---------------------------------------------------------------------------------------
+    # inputs
+
+    def add_imu(self, t: float, acc: np.ndarray, gyro: np.ndarray) -> bool:
+        """Buffer one IMU sample (IMU frame, m/s^2 and rad/s); False if rejected."""
+        return self.imu.add(t, acc, gyro)
+
+    def add_wheel(self, t: float, T_odom_base: np.ndarray) -> bool:
+        """Buffer one wheel odometry pose (base_link in the wheel ``odom`` frame)."""
+        return self.wheels.add(t, T_odom_base)
+
+    @property
+    def initialized(self) -> bool:
+        return self._state is not None
+
+    @property
+    def graph_size(self) -> int:
+        """Number of factors currently held by iSAM2 (bounded by ``reset_every``)."""
+        return 0 if self._isam is None else int(self._isam.getFactorsUnsafe().size())
+
+    # ---------------------------------------------------------------------------------------
+    # initialisation
+
+    def _new_isam(self) -> gtsam.ISAM2:
+        p = gtsam.ISAM2Params()
+        p.setRelinearizeThreshold(self.config.relinearize_threshold)
+        p.relinearizeSkip = 1
+        p.setFactorization("QR")
+        return gtsam.ISAM2(p)
+
+    def initialize(
+        self, t: float, pose: np.ndarray | None = None, velocity: np.ndarray | None = None
+    ) -> FusionOutput:
+        """Create the first state at stamp ``t`` [s].
+
+        Args:
+            pose: 4x4 initial pose of base_link in the odometry frame. None: identity, with
+                roll/pitch aligned to gravity from the preceding IMU samples when enabled.
+            velocity: (3,) initial velocity in the odometry frame [m/s]. None: zero (tight
+                prior if the IMU showed the robot at rest, loose otherwise).
+
+        Raises:
+            ValueError: non-finite ``t``, invalid ``pose`` or ``velocity``.
+        """
+        cfg = self.config
+        t = float(t)
+        if not math.isfinite(t):
+            raise ValueError("initial stamp must be finite")
+        notes: list[str] = []
+        stationary = False
+        gyro_bias = np.zeros(3)
+        samples = self.imu.samples(t - cfg.gravity_window_s, t) if cfg.use_imu else []
+        if samples:
+            align = gravity_alignment(samples, self.T_base_imu[:3, :3])
+            stationary = align.stationary
+            if stationary and cfg.estimate_gyro_bias_at_rest:
+                gyro_bias = align.gyro_bias
+        if pose is None:
+            T0 = np.eye(4)
+            if cfg.gravity_align and samples:
+                T0[:3, :3] = align.R_world_base
+                notes.append("gravity aligned" + (" (at rest)" if stationary else " (moving)"))
+        else:
+            T0 = _as_pose(pose)
+            if T0 is None:
+                raise ValueError("initial pose must be a finite rigid 4x4 transform")
+        if velocity is None:
+            v0 = np.zeros(3)
+            sigma_v = cfg.prior_sigma_velocity if stationary else cfg.prior_sigma_velocity_moving
+        else:
+            v0 = np.asarray(velocity, dtype=float).reshape(3)
+            if not _finite(v0):
+                raise ValueError("initial velocity must be finite")
+            sigma_v = cfg.prior_sigma_velocity
+        bias0 = gtsam.imuBias.ConstantBias(np.zeros(3), gyro_bias)
+
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        pose_sigmas = np.array([cfg.prior_sigma_rotation] * 3 + [cfg.prior_sigma_translation] * 3)
+        graph.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(T0),
+                                         gtsam.noiseModel.Diagonal.Sigmas(pose_sigmas)))
+        graph.add(gtsam.PriorFactorVector(V(0), v0, gtsam.noiseModel.Isotropic.Sigma(3, sigma_v)))
+        bias_sigmas = np.array([cfg.imu.accel_bias_prior_sigma] * 3
+                               + [cfg.imu.gyro_bias_prior_sigma] * 3)
+        graph.add(gtsam.PriorFactorConstantBias(B(0), bias0,
+                                                gtsam.noiseModel.Diagonal.Sigmas(bias_sigmas)))
+        values.insert(X(0), gtsam.Pose3(T0))
+        values.insert(V(0), v0)
+        values.insert(B(0), bias0)
+        self._isam = self._new_isam()
+        self._isam.update(graph, values)
+        self._since_reset = 0
+        self._history.clear()
+        self._body_rate = np.zeros(6)
+        self._state = None
+        out = self._commit(t, 0, notes, 0, False, False, False)
+        assert out is not None
+        return out
+
+    # ---------------------------------------------------------------------------------------
+    # update
+
+    def update(
+        self,
+        t: float,
+        T_icp: np.ndarray | None,
+        degeneracy: Any = None,
+        *,
+        wheel_delta: np.ndarray | None = None,
+        lidar_information: np.ndarray | None = None,
+        wheel_info: np.ndarray | None = None,
+    ) -> FusionOutput | None:
+        """Add the state at scan stamp ``t`` and return the fused estimate.
+
+        Args:
+            t: scan stamp [s]; must be later than the previous one.
+            T_icp: 4x4 pose of base_link in the odometry frame from scan-to-map registration
+                (None or invalid: no LiDAR factor).
+            degeneracy: object with ``basis_scaled`` ((k, 6) rows, scaled twists ``(v, L w)`` in
+                the LiDAR scan body frame) and ``characteristic_length`` L [m] — a
+                ``DegeneracyResult``. None or ``ok == False``: nothing is degenerate.
+            wheel_delta: 4x4 wheel motion of base_link from the previous stamp to ``t`` in
+                base_link at the previous stamp. None: taken from the wheel buffer.
+            lidar_information: 6x6 ``(v, w)`` information of the registration in the LiDAR body
+                frame (e.g. from the ICP Hessian). None: from ``config.lidar``.
+            wheel_info: 6x6 ``(v, w)`` information of the wheel increment in base_link. None:
+                from ``config.wheel``.
+
+        Returns:
+            The fused output, or None when the update was rejected (bad stamp or solver
+            failure; see ``stats``). Before :meth:`initialize` the first call initialises at
+            ``t`` (identity/gravity-aligned pose) and ignores ``T_icp``.
+        """
+        if self._state is None:
+            try:
+                return self.initialize(t)
+            except ValueError:
+                self.stats.n_rejected_stamp += 1
+                return None
+        cfg = self.config
+        prev = self._state
+        try:
+            t = float(t)
+        except (TypeError, ValueError):
+            t = math.nan
+        if not math.isfinite(t) or t <= prev.t + 1e-6:
+            self.stats.n_rejected_stamp += 1
+            return None
+        dt = t - prev.t
+        notes: list[str] = []
+        i = prev.index + 1
+        T_prev = matrix(prev.pose)
+
+        # -- LiDAR measurement and degenerate subspace -------------------------------------
+        T_meas = _as_pose(T_icp) if T_icp is not None else None
+        if T_icp is not None and T_meas is None:
+            self.stats.n_rejected_lidar += 1
+            notes.append("LiDAR pose rejected (non-finite or not rigid)")
+        basis = np.zeros((0, 6))
+        length = cfg.lidar.default_length
+        if T_meas is not None and degeneracy is not None and getattr(degeneracy, "ok", True):
+            try:
+                basis = np.asarray(degeneracy.basis_scaled, dtype=float).reshape(-1, 6)
+                length = float(degeneracy.characteristic_length)
+            except (AttributeError, TypeError, ValueError):
+                basis, length = np.full((1, 6), np.nan), math.nan
+            if not (_finite(basis) and math.isfinite(length) and length > 0.0):
+                self.stats.n_rejected_basis += 1
+                notes.append("degeneracy basis rejected (non-finite); LiDAR factor dropped")
+                T_meas = None
+                basis = np.zeros((0, 6))
+                length = cfg.lidar.default_length
+        omega_lidar = cfg.lidar.information()
+        if lidar_information is not None:
+            cand = np.asarray(lidar_information, dtype=float)
+            if (cand.shape == (6, 6) and _finite(cand)
+                    and np.linalg.eigvalsh(0.5 * (cand + cand.T)).min()
+                    >= -1e-9 * max(np.abs(cand).max(), 1.0)):
+                omega_lidar = 0.5 * (cand + cand.T)
+            else:
+                self.stats.n_rejected_lidar_information += 1
+                notes.append("LiDAR information rejected; using the configured one")
+
+        # -- wheel increment ------------------------------------------------------------------
+        delta_w = None
+        if wheel_delta is not None:
+            delta_w = _as_pose(wheel_delta)
+            if delta_w is None:
+                self.stats.n_rejected_wheel += 1
+                notes.append("wheel increment rejected")
+        else:
+            delta_w = self.wheels.delta(prev.t, t)
+            if delta_w is not None:
+                delta_w = _as_pose(delta_w)
+        if delta_w is None:
+            self.stats.n_no_wheel += 1
+        omega_wheel = None
+        if delta_w is not None:
+            omega_wheel = wheel_information(delta_w, cfg.wheel)
+            if wheel_info is not None:
+                cand = np.asarray(wheel_info, dtype=float)
+                if cand.shape == (6, 6) and _finite(cand):
+                    omega_wheel = 0.5 * (cand + cand.T)
+                else:
+                    self.stats.n_rejected_wheel += 1
+                    notes.append("wheel information rejected; using the configured one")
+
+        if T_meas is not None:
+            split = split_information(
+                omega_lidar, omega_wheel, basis, length, self.T_base_lidar,
+                epsilon=cfg.lidar.degenerate_epsilon, wheel_weak_scale=cfg.wheel_weak_scale,
+                mode=cfg.lidar.restriction,
+            )
+        else:  # nothing from the LiDAR: every direction is "degenerate"
+            split = split_information(
+                omega_lidar, omega_wheel, np.eye(6), length, self.T_base_lidar,
+                mode=cfg.lidar.restriction,
+            )
+
+        # -- motion: IMU preintegration or fallback ------------------------------------------
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        used_imu = False
+        pim = None
+        if cfg.use_imu and dt <= cfg.max_interval_s:
+            pim = gtsam.PreintegratedCombinedMeasurements(self._params, prev.bias)
+            rep = integrate(self.imu, pim, prev.t, t, cfg.imu.max_gap_s,
+                            cfg.imu.max_extrapolation_s)
+            used_imu = rep.covered
+            if not used_imu:
+                notes.append(f"no IMU: {rep.reason}")
+        if used_imu:
+            graph.add(gtsam.CombinedImuFactor(X(i - 1), V(i - 1), X(i), V(i), B(i - 1), B(i), pim))
+            nav = pim.predict(gtsam.NavState(prev.pose, prev.velocity), prev.bias)
+            pose_guess, vel_guess = nav.pose(), np.asarray(nav.velocity())
+        else:
+            self.stats.n_no_imu += 1
+            if delta_w is not None:
+                motion = delta_w
+                notes.append("no IMU: wheel increment covers the LiDAR-blind directions")
+            else:
+                motion = exp(self._body_rate * dt)
+                s_t = max(cfg.no_imu_sigma_floor_translation,
+                          cfg.no_imu_sigma_translation_per_s * dt)
+                s_r = max(cfg.no_imu_sigma_floor_rotation, cfg.no_imu_sigma_rotation_per_s * dt)
+                omega_cv = np.diag([s_t**-2] * 3 + [s_r**-2] * 3)
+                # like the wheels, the motion model only acts where the LiDAR is blind, so a
+                # LiDAR/motion-model disagreement elsewhere cannot leak into those directions
+                cv = split_information(
+                    omega_lidar, omega_cv, basis if T_meas is not None else np.eye(6), length,
+                    self.T_base_lidar, mode=cfg.lidar.restriction,
+                ).wheel
+                if cv is not None:
+                    graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(motion),
+                                                       _noise_from_information(cv)))
+                notes.append("no IMU: constant-velocity motion model")
+            pose_guess = prev.pose.compose(gtsam.Pose3(motion))
+            vel_guess = T_prev[:3, :3] @ motion[:3, 3] / dt
+            graph.add(gtsam.PriorFactorVector(
+                V(i), vel_guess, gtsam.noiseModel.Isotropic.Sigma(3, cfg.no_imu_sigma_velocity)))
+            rw = np.array([cfg.imu.accel_bias_random_walk] * 3 + [cfg.imu.gyro_bias_random_walk] * 3)
+            graph.add(gtsam.BetweenFactorConstantBias(
+                B(i - 1), B(i), gtsam.imuBias.ConstantBias(),
+                gtsam.noiseModel.Diagonal.Sigmas(np.maximum(rw * math.sqrt(dt), 1e-9))))
+
+        # -- LiDAR and wheel factors ---------------------------------------------------------
+        used_lidar = split.lidar is not None
+        if used_lidar:
+            Z = np.linalg.inv(T_prev) @ T_meas
+            graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(orthonormalize(Z)),
+                                               _noise_from_information(split.lidar)))
+        used_wheel = split.wheel is not None and delta_w is not None
+        if used_wheel:
+            graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(delta_w),
+                                               _noise_from_information(split.wheel)))
+
+        values.insert(X(i), pose_guess)
+        values.insert(V(i), np.asarray(vel_guess, dtype=float))
+        values.insert(B(i), prev.bias)
+        try:
+            self._isam.update(graph, values)
+            for _ in range(max(0, cfg.extra_iterations)):
+                self._isam.update()
+            out = self._commit(t, i, notes, split.dimension, used_lidar, used_imu, used_wheel)
+        except (RuntimeError, ValueError, IndexError) as exc:
+            out = None
+            notes.append(f"solver failure: {exc}")
+        if out is None:
+            self.stats.n_solver_failures += 1
+            self._recover(prev)
+            return None
+        self.stats.n_updates += 1
+        self._body_rate = log(np.linalg.inv(T_prev) @ out.pose) / dt
+        self.imu.discard_before(prev.t - 1.0)
+        self._since_reset += 1
+        if self._since_reset >= max(1, cfg.reset_every):
+            self._reset()
+        return out
+
+    # ---------------------------------------------------------------------------------------
+    # bookkeeping
+
+    def _commit(self, t: float, i: int, notes: list[str], dim: int, used_lidar: bool,
+                used_imu: bool, used_wheel: bool) -> FusionOutput | None:
+        """Read the newest state from iSAM2; None when it is not finite."""
+        est = self._isam.calculateEstimate()
+        pose = est.atPose3(X(i))
+        vel = np.asarray(est.atVector(V(i)), dtype=float)
+        bias = est.atConstantBias(B(i))
+        cov_g = np.asarray(self._isam.marginalCovariance(X(i)), dtype=float)
+        T = matrix(pose)
+        if not _finite(T, vel, bias.vector(), cov_g):
+            return None
+        self._state = _State(t, i, pose, vel, bias, cov_g)
+        self._history.append((t, T))
+        out = FusionOutput(
+            t=t, index=i, pose=T, velocity=vel,
+            accel_bias=np.asarray(bias.accelerometer(), dtype=float),
+            gyro_bias=np.asarray(bias.gyroscope(), dtype=float),
+            covariance=_from_gtsam_matrix(cov_g), degenerate_dimension=dim,
+            used_lidar=used_lidar, used_imu=used_imu, used_wheel=used_wheel, notes=notes,
+        )
+        self.last_output = out
+        return out
+
+    def _reset(self) -> None:
+        """Rebuild iSAM2 from the joint marginal of the newest (X, V, B)."""
+        s = self._state
+        keys = [X(s.index), V(s.index), B(s.index)]
+        lin = gtsam.Values()
+        lin.insert(keys[0], s.pose)
+        lin.insert(keys[1], s.velocity)
+        lin.insert(keys[2], s.bias)
+        graph = gtsam.NonlinearFactorGraph()
+        try:
+            info = np.asarray(self._isam.jointMarginalInformation(keys).fullMatrix(), dtype=float)
+            if info.shape != (15, 15) or not _finite(info):
+                raise ValueError("bad joint marginal")
+            R = np.linalg.qr(sqrt_information(info), mode="r")
+            jf = gtsam.JacobianFactor(keys[0], R[:, 0:6], keys[1], R[:, 6:9], keys[2],
+                                      R[:, 9:15], np.zeros(15), gtsam.noiseModel.Unit.Create(15))
+            graph.add(gtsam.LinearContainerFactor(jf, lin))
+            isam = self._new_isam()
+            isam.update(graph, lin)
+        except (RuntimeError, ValueError, IndexError):
+            self.stats.n_reset_fallbacks += 1
+            isam = self._priors_isam(s)
+        self._isam = isam
+        self._since_reset = 0
+        self.stats.n_resets += 1
+
+    def _priors_isam(self, s: _State) -> gtsam.ISAM2:
+        """Fresh iSAM2 with independent priors at state ``s`` (recovery path)."""
+        cfg = self.config
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        cov = 0.5 * (s.cov_gtsam + s.cov_gtsam.T) + 1e-12 * np.eye(6)
+        try:
+            pose_noise = gtsam.noiseModel.Gaussian.Covariance(cov)
+        except RuntimeError:
+            pose_noise = gtsam.noiseModel.Isotropic.Sigma(6, 1.0)
+        graph.add(gtsam.PriorFactorPose3(X(s.index), s.pose, pose_noise))
+        graph.add(gtsam.PriorFactorVector(V(s.index), s.velocity, gtsam.noiseModel.Isotropic.Sigma(
+            3, cfg.prior_sigma_velocity_moving)))
+        graph.add(gtsam.PriorFactorConstantBias(B(s.index), s.bias, gtsam.noiseModel.Diagonal.Sigmas(
+            np.array([cfg.imu.accel_bias_prior_sigma] * 3 + [cfg.imu.gyro_bias_prior_sigma] * 3))))
+        values.insert(X(s.index), s.pose)
+        values.insert(V(s.index), s.velocity)
+        values.insert(B(s.index), s.bias)
+        isam = self._new_isam()
+        isam.update(graph, values)
+        return isam
+
+    def _recover(self, prev: _State) -> None:
+        """After a solver failure: restart from the last good state."""
+        self._state = prev
+        try:
+            self._isam = self._priors_isam(prev)
+        except (RuntimeError, ValueError, IndexError):  # pragma: no cover - last resort
+            self._isam = None
+            self._state = None
+        self._since_reset = 0
+
+    # ---------------------------------------------------------------------------------------
+    # prediction
+
+    def predict(self, t: float) -> np.ndarray | None:
+        """Pose of base_link (4x4, odometry frame) at ``t`` [s]; None before initialisation.
+
+        Later than the newest state: IMU propagation from it (current bias); without IMU
+        coverage the wheel increment, else the previous interval's constant body twist.
+        Earlier: interpolation between recent fused keyframes.
+        """
+        out = self.predict_poses([t])
+        return None if out is None else out[0]
+
+    def predict_poses(self, times: Iterable[float]) -> np.ndarray | None:
+        """Poses (n, 4, 4) at many stamps with one IMU integration pass (for deskewing).
+
+        Each query costs one ``NavState`` prediction, so deskewers should query a coarse grid
+        (tens of stamps per sweep) and interpolate between them.
+        """
+        if self._state is None:
+            return None
+        s = self._state
+        times = np.asarray(list(times), dtype=float).reshape(-1)
+        out = np.empty((times.size, 4, 4))
+        T_last = matrix(s.pose)
+        future = []
+        for k, tq in enumerate(times):
+            if not math.isfinite(tq):
+                out[k] = T_last
+            elif tq <= s.t:
+                out[k] = self._interpolate_history(tq)
+            else:
+                future.append(k)
+        if not future:
+            return out
+        order = sorted(future, key=lambda k: times[k])
+        t_max = float(times[order[-1]])
+        cfg = self.config
+        covered = False
+        if cfg.use_imu and t_max - s.t <= cfg.max_interval_s:
+            probe = gtsam.PreintegratedCombinedMeasurements(self._params, s.bias)
+            covered = integrate(self.imu, probe, s.t, t_max, cfg.imu.max_gap_s,
+                                cfg.imu.max_extrapolation_s).covered
+        if covered:
+            nav0 = gtsam.NavState(s.pose, s.velocity)
+            knots = self.imu.knots(s.t, t_max, cfg.imu.max_extrapolation_s)
+            pim = gtsam.PreintegratedCombinedMeasurements(self._params, s.bias)
+            kt = [k[0] for k in knots]
+            j = 0  # current knot segment start
+            t_cur = s.t
+            acc_cur, gyr_cur = knots[0][1], knots[0][2]
+            for k in order:
+                tq = float(times[k])
+                while j + 1 < len(knots) and kt[j + 1] <= tq:
+                    tn, an, gn = knots[j + 1]
+                    if tn > t_cur:
+                        pim.integrateMeasurement(0.5 * (acc_cur + an), 0.5 * (gyr_cur + gn),
+                                                 tn - t_cur)
+                    t_cur, acc_cur, gyr_cur = tn, an, gn
+                    j += 1
+                if tq > t_cur:
+                    ta, aa, ga = knots[j]
+                    tb, ab, gb = knots[min(j + 1, len(knots) - 1)]
+                    w = 0.0 if tb <= ta else (tq - ta) / (tb - ta)
+                    aq, gq = (1 - w) * aa + w * ab, (1 - w) * ga + w * gb
+                    pim.integrateMeasurement(0.5 * (acc_cur + aq), 0.5 * (gyr_cur + gq),
+                                             tq - t_cur)
+                    t_cur, acc_cur, gyr_cur = tq, aq, gq
+                out[k] = matrix(pim.predict(nav0, s.bias).pose())
+            return out
+        for k in order:
+            tq = float(times[k])
+            delta = self.wheels.delta(s.t, tq)
+            if delta is None:
+                delta = exp(self._body_rate * (tq - s.t))
+            out[k] = T_last @ delta
+        return out
+
+    def _interpolate_history(self, t: float) -> np.ndarray:
+        hist = list(self._history)
+        if t <= hist[0][0]:
+            return hist[0][1]
+        for (ta, Ta), (tb, Tb) in zip(hist[:-1], hist[1:]):
+            if ta <= t <= tb:
+                w = (t - ta) / (tb - ta) if tb > ta else 0.0
+                return Ta @ exp(w * log(np.linalg.inv(Ta) @ Tb))
+        return hist[-1][1]

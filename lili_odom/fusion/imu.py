@@ -1,0 +1,331 @@
+"""IMU noise model, GTSAM preintegration parameters, and a sample buffer.
+
+Frames and units:
+
+* The IMU measures in its own frame ``os_imu``: specific force [m/s^2] (gravity reaction
+  included, so a resting IMU reads about +9.81 m/s^2 along its up axis) and angular rate
+  [rad/s]. ouster-ros publishes these units.
+* The estimator's *body* is ``base_link``. The IMU -> body extrinsic ``T_base_imu`` (pose of
+  ``os_imu`` in ``base_link``) is handed to GTSAM as ``body_P_sensor``: GTSAM then rotates each
+  bias-corrected measurement into the body frame and removes the centripetal acceleration of
+  the lever arm (it neglects the angular-acceleration term, which is tiny for a Husky). The
+  bias states therefore live in the **IMU frame**.
+* The world (odometry) frame is gravity-aligned: gravity is ``-g`` along its z axis
+  (``PreintegrationCombinedParams.MakeSharedU``).
+"""
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import gtsam
+import numpy as np
+
+from lili_odom.geometry import pose3
+
+__all__ = [
+    "ImuNoiseConfig",
+    "ImuSample",
+    "ImuBuffer",
+    "IntegrationReport",
+    "GravityAlignment",
+    "make_preintegration_params",
+    "integrate",
+    "gravity_alignment",
+]
+
+STANDARD_GRAVITY = 9.80665
+
+
+@dataclass
+class ImuNoiseConfig:
+    """Continuous-time IMU noise (ICM-20948 class sensor, as in the OS1), with margin.
+
+    The datasheet white noise of the ICM-20948 is about 2.3e-3 m/s^2/sqrt(Hz) and
+    2.6e-4 rad/s/sqrt(Hz); the defaults are inflated ~4x for vibration on a skid-steer robot.
+
+    Attributes:
+        accel_noise_density: accelerometer white noise [m/s^2/sqrt(Hz)].
+        gyro_noise_density: gyroscope white noise [rad/s/sqrt(Hz)].
+        accel_bias_random_walk: accelerometer bias random walk [m/s^3/sqrt(Hz)].
+        gyro_bias_random_walk: gyroscope bias random walk [rad/s^2/sqrt(Hz)].
+        integration_sigma: position integration error [m/sqrt(Hz)] (GTSAM's
+            integrationCovariance), covers the piecewise-constant sample model.
+        gravity: magnitude of gravity [m/s^2], along -z of the world frame.
+        accel_bias_prior_sigma: prior std of the initial accelerometer bias [m/s^2].
+        gyro_bias_prior_sigma: prior std of the initial gyro bias [rad/s].
+        max_gap_s: a hole between consecutive samples longer than this [s] makes an interval
+            "not covered": the estimator then uses its no-IMU fallback for that interval.
+        max_extrapolation_s: how far [s] the first/last sample may be held constant to cover
+            the ends of an interval.
+        buffer_seconds: samples older than the newest minus this [s] are dropped.
+    """
+
+    accel_noise_density: float = 1.0e-2
+    gyro_noise_density: float = 1.0e-3
+    accel_bias_random_walk: float = 2.0e-4
+    gyro_bias_random_walk: float = 2.0e-5
+    integration_sigma: float = 1.0e-4
+    gravity: float = STANDARD_GRAVITY
+    accel_bias_prior_sigma: float = 0.1
+    gyro_bias_prior_sigma: float = 0.01
+    max_gap_s: float = 0.25
+    max_extrapolation_s: float = 0.05
+    buffer_seconds: float = 30.0
+
+
+def make_preintegration_params(
+    cfg: ImuNoiseConfig, T_base_imu: np.ndarray | None = None
+) -> gtsam.PreintegrationCombinedParams:
+    """GTSAM combined-preintegration parameters (gravity along -z of the world frame).
+
+    Args:
+        cfg: noise densities.
+        T_base_imu: 4x4 pose of the IMU frame in ``base_link`` (None = identity); set as
+            ``body_P_sensor``.
+    """
+    p = gtsam.PreintegrationCombinedParams.MakeSharedU(cfg.gravity)
+    i3 = np.eye(3)
+    p.setAccelerometerCovariance(cfg.accel_noise_density**2 * i3)
+    p.setGyroscopeCovariance(cfg.gyro_noise_density**2 * i3)
+    p.setIntegrationCovariance(cfg.integration_sigma**2 * i3)
+    p.setBiasAccCovariance(cfg.accel_bias_random_walk**2 * i3)
+    p.setBiasOmegaCovariance(cfg.gyro_bias_random_walk**2 * i3)
+    if T_base_imu is not None and not np.allclose(T_base_imu, np.eye(4)):
+        p.setBodyPSensor(pose3(T_base_imu))
+    return p
+
+
+class ImuSample(NamedTuple):
+    """One IMU reading at time ``t`` [s]: specific force [m/s^2] and rate [rad/s], IMU frame."""
+
+    t: float
+    acc: np.ndarray
+    gyro: np.ndarray
+
+
+@dataclass
+class IntegrationReport:
+    """What :func:`integrate` did for an interval [t0, t1]."""
+
+    covered: bool = False
+    n_segments: int = 0
+    integrated_s: float = 0.0
+    largest_gap_s: float = 0.0
+    reason: str = ""
+
+
+class ImuBuffer:
+    """Time-ordered IMU samples with robust insertion.
+
+    ``add`` keeps the buffer sorted even when samples arrive out of order, drops exact
+    duplicates (same stamp within 1 us) and non-finite samples, and prunes samples older than
+    ``buffer_seconds`` before the newest. Counters say what happened.
+    """
+
+    def __init__(self, buffer_seconds: float = 30.0, max_samples: int = 20000) -> None:
+        self.buffer_seconds = float(buffer_seconds)
+        self.max_samples = int(max_samples)
+        self._t: list[float] = []
+        self._s: list[ImuSample] = []
+        self.n_added = 0
+        self.n_nonfinite = 0
+        self.n_duplicates = 0
+        self.n_out_of_order = 0
+
+    def __len__(self) -> int:
+        return len(self._t)
+
+    @property
+    def newest_time(self) -> float | None:
+        return self._t[-1] if self._t else None
+
+    @property
+    def oldest_time(self) -> float | None:
+        return self._t[0] if self._t else None
+
+    def add(self, t: float, acc: np.ndarray, gyro: np.ndarray) -> bool:
+        """Insert a sample; returns False (and counts why) when it was rejected."""
+        try:
+            t = float(t)
+            acc = np.asarray(acc, dtype=np.float64).reshape(3)
+            gyro = np.asarray(gyro, dtype=np.float64).reshape(3)
+        except (TypeError, ValueError):
+            self.n_nonfinite += 1
+            return False
+        if not (math.isfinite(t) and np.all(np.isfinite(acc)) and np.all(np.isfinite(gyro))):
+            self.n_nonfinite += 1
+            return False
+        i = bisect.bisect_left(self._t, t)
+        if (i < len(self._t) and abs(self._t[i] - t) < 1e-6) or (
+            i > 0 and abs(self._t[i - 1] - t) < 1e-6
+        ):
+            self.n_duplicates += 1
+            return False
+        if i < len(self._t):
+            self.n_out_of_order += 1
+        self._t.insert(i, t)
+        self._s.insert(i, ImuSample(t, acc, gyro))
+        self.n_added += 1
+        self._prune()
+        return True
+
+    def _prune(self) -> None:
+        horizon = self._t[-1] - self.buffer_seconds
+        k = bisect.bisect_left(self._t, horizon)
+        k = max(k, len(self._t) - self.max_samples)
+        if k > 0:
+            del self._t[:k]
+            del self._s[:k]
+
+    def samples(self, t0: float, t1: float) -> list[ImuSample]:
+        """Samples with t0 <= t <= t1 (sorted)."""
+        a = bisect.bisect_left(self._t, t0)
+        b = bisect.bisect_right(self._t, t1)
+        return self._s[a:b]
+
+    def value_at(self, t: float, max_extrapolation_s: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """Linearly interpolated (acc, gyro) at ``t``; held constant up to the limit beyond the
+        data; None when ``t`` is farther than that from every sample."""
+        if not self._t:
+            return None
+        i = bisect.bisect_left(self._t, t)
+        if i < len(self._t) and self._t[i] == t:
+            s = self._s[i]
+            return s.acc, s.gyro
+        if i == 0:
+            s = self._s[0]
+            return (s.acc, s.gyro) if s.t - t <= max_extrapolation_s else None
+        if i == len(self._t):
+            s = self._s[-1]
+            return (s.acc, s.gyro) if t - s.t <= max_extrapolation_s else None
+        a, b = self._s[i - 1], self._s[i]
+        w = (t - a.t) / (b.t - a.t)
+        return (1 - w) * a.acc + w * b.acc, (1 - w) * a.gyro + w * b.gyro
+
+    def knots(self, t0: float, t1: float, max_extrapolation_s: float
+              ) -> list[tuple[float, np.ndarray, np.ndarray]] | None:
+        """Knots (t, acc, gyro) covering [t0, t1]: the interpolated ends plus inner samples."""
+        start = self.value_at(t0, max_extrapolation_s)
+        end = self.value_at(t1, max_extrapolation_s)
+        if start is None or end is None:
+            return None
+        out = [(t0, start[0], start[1])]
+        for s in self.samples(t0, t1):
+            if t0 < s.t < t1:
+                out.append((s.t, s.acc, s.gyro))
+        out.append((t1, end[0], end[1]))
+        return out
+
+    def discard_before(self, t: float) -> None:
+        """Drop samples older than ``t`` but keep the last one before it (for interpolation)."""
+        k = bisect.bisect_left(self._t, t) - 1
+        if k > 0:
+            del self._t[:k]
+            del self._s[:k]
+
+
+def integrate(
+    buffer: ImuBuffer,
+    pim: gtsam.PreintegratedCombinedMeasurements,
+    t0: float,
+    t1: float,
+    max_gap_s: float,
+    max_extrapolation_s: float,
+) -> IntegrationReport:
+    """Integrate the buffer's samples over [t0, t1] into ``pim``.
+
+    Each piece between consecutive knots is integrated with the mean of its end values
+    (exact for piecewise-linear signals). The interval counts as covered when the ends can be
+    interpolated (or held for at most ``max_extrapolation_s``) and no hole between samples
+    exceeds ``max_gap_s``; otherwise nothing is integrated.
+    """
+    rep = IntegrationReport()
+    if not (math.isfinite(t0) and math.isfinite(t1)) or t1 <= t0:
+        rep.reason = "empty or invalid interval"
+        return rep
+    knots = buffer.knots(t0, t1, max_extrapolation_s)
+    if knots is None:
+        rep.reason = "no IMU samples near the interval ends"
+        return rep
+    # holes are measured inside the interval: between its ends and the samples within it
+    knot_gaps = np.diff([k[0] for k in knots])
+    rep.largest_gap_s = float(knot_gaps.max()) if knot_gaps.size else 0.0
+    if rep.largest_gap_s > max_gap_s:
+        rep.reason = f"IMU gap of {rep.largest_gap_s:.3f} s"
+        return rep
+    for (ta, aa, ga), (tb, ab, gb) in zip(knots[:-1], knots[1:]):
+        dt = tb - ta
+        if dt <= 0.0:
+            continue
+        pim.integrateMeasurement(0.5 * (aa + ab), 0.5 * (ga + gb), dt)
+        rep.n_segments += 1
+        rep.integrated_s += dt
+    rep.covered = rep.n_segments > 0
+    if not rep.covered:
+        rep.reason = "nothing to integrate"
+    return rep
+
+
+@dataclass
+class GravityAlignment:
+    """Initial attitude from resting IMU samples.
+
+    Attributes:
+        R_world_base: 3x3 rotation of base_link in the gravity-aligned world frame (yaw 0).
+        stationary: True when the samples looked like a robot at rest.
+        gyro_bias: mean angular rate [rad/s] in the IMU frame (a bias estimate when stationary).
+        acc_mean_imu: mean specific force [m/s^2] in the IMU frame.
+        n_samples: samples used.
+    """
+
+    R_world_base: np.ndarray
+    stationary: bool
+    gyro_bias: np.ndarray
+    acc_mean_imu: np.ndarray
+    n_samples: int
+
+
+def gravity_alignment(
+    samples: list[ImuSample],
+    R_base_imu: np.ndarray,
+    *,
+    max_acc_std: float = 0.2,
+    max_gyro_norm: float = 0.05,
+    min_samples: int = 10,
+) -> GravityAlignment:
+    """Roll and pitch of base_link from the mean specific force (yaw is set to 0).
+
+    At rest the accelerometer measures the reaction to gravity, i.e. +g along the world's up
+    axis expressed in the sensor frame; the returned rotation maps that direction onto +z.
+
+    Args:
+        samples: IMU samples (IMU frame) taken while the robot is hopefully at rest.
+        R_base_imu: 3x3 rotation of the IMU frame in base_link.
+        max_acc_std: stationarity threshold on the std of the specific force norm [m/s^2].
+        max_gyro_norm: stationarity threshold on the mean rate norm [rad/s].
+        min_samples: fewer samples -> identity attitude, not stationary.
+    """
+    if len(samples) < min_samples:
+        return GravityAlignment(np.eye(3), False, np.zeros(3), np.zeros(3), len(samples))
+    acc = np.array([s.acc for s in samples])
+    gyro = np.array([s.gyro for s in samples])
+    acc_mean = acc.mean(axis=0)
+    gyro_mean = gyro.mean(axis=0)
+    stationary = bool(
+        np.linalg.norm(acc, axis=1).std() < max_acc_std
+        and np.linalg.norm(gyro_mean) < max_gyro_norm
+        and np.linalg.norm(gyro, axis=1).max() < 4 * max_gyro_norm
+    )
+    up_base = np.asarray(R_base_imu) @ acc_mean
+    norm = np.linalg.norm(up_base)
+    if not np.isfinite(norm) or norm < 1e-3:
+        return GravityAlignment(np.eye(3), False, gyro_mean, acc_mean, len(samples))
+    up_base /= norm
+    # Rotation taking up_base onto z with zero yaw: R = Ry(pitch) Rx(roll) (ZYX with yaw 0).
+    roll = math.atan2(up_base[1], up_base[2])
+    pitch = math.atan2(-up_base[0], math.hypot(up_base[1], up_base[2]))
+    R = np.asarray(gtsam.Rot3.Ypr(0.0, pitch, roll).matrix())
+    return GravityAlignment(R, stationary, gyro_mean, acc_mean, len(samples))

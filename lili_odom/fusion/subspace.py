@@ -1,0 +1,185 @@
+"""Split relative-pose information between the LiDAR and the wheels by a degenerate subspace.
+
+The detectors report the degenerate subspace as orthonormal rows ``basis_scaled`` in the
+*scaled* twist space of the LiDAR scan body frame: ``s = (v, L w)`` with ``L`` the
+characteristic length [m] (see ``lili_odom.degeneracy.result``). The factors of the estimator
+are written in the body frame of ``base_link``, plain ``(v [m], w [rad])``.
+
+A base_link twist and a scaled LiDAR twist of the same rigid motion are related by
+
+    xi_base = M s,    M = Ad(T_base_lidar) S^-1,    S = diag(1, 1, 1, L, L, L)
+
+(moving the LiDAR by ``exp(xi_lidar)`` in its body frame moves base_link by
+``exp(Ad(T_base_lidar) xi_lidar)``). An information matrix ``Omega_base`` for ``xi_base``
+becomes ``M^T Omega_base M`` for ``s``. All splitting happens in the scaled LiDAR coordinates,
+where the basis is orthonormal and metres and radians are comparable; results are mapped back
+with ``M^-1``.
+
+Two ways of removing directions are offered:
+
+* ``"marginalize"`` (default): the measurement's components along the dropped directions are
+  treated as unknown, i.e. marginalised out of the measurement (Schur complement). This is the
+  statistically consistent choice when the information has cross terms between the kept and
+  the dropped directions.
+* ``"project"``: plain ``P Omega P`` with the orthogonal projector ``P`` onto the kept
+  directions (drops the cross terms without re-weighting).
+
+Both coincide when the subspace is an eigenspace of the information (e.g. Zhang's method).
+The quadratic form of a restricted information depends only on the kept components of the
+error, so the factor pulls the estimate only along the kept directions.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from lili_odom.geometry import adjoint, scaling_matrix
+
+__all__ = [
+    "SubspaceSplit",
+    "scaled_lidar_to_base",
+    "orthonormal_rows",
+    "restrict_information",
+    "split_information",
+    "sqrt_information",
+]
+
+
+def scaled_lidar_to_base(T_base_lidar: np.ndarray, length: float) -> np.ndarray:
+    """6x6 ``M`` with ``xi_base = M @ s`` for a scaled LiDAR body twist ``s = (v, L w)``."""
+    return adjoint(T_base_lidar) @ np.linalg.inv(scaling_matrix(length))
+
+
+def orthonormal_rows(basis: np.ndarray, tol: float = 1e-6) -> np.ndarray:
+    """Orthonormal rows spanning the row space of ``basis`` (k, 6); rank-deficient rows dropped."""
+    basis = np.asarray(basis, dtype=float).reshape(-1, 6)
+    if basis.shape[0] == 0:
+        return np.zeros((0, 6))
+    _, s, vt = np.linalg.svd(basis, full_matrices=False)
+    rank = int(np.count_nonzero(s > tol * max(s[0], 1e-300))) if s.size else 0
+    return vt[:rank]
+
+
+def _complement(rows: np.ndarray) -> np.ndarray:
+    """Orthonormal rows spanning the orthogonal complement of ``rows`` in R^6."""
+    if rows.shape[0] == 0:
+        return np.eye(6)
+    _, _, vt = np.linalg.svd(rows, full_matrices=True)
+    return vt[rows.shape[0]:]
+
+
+def restrict_information(
+    omega: np.ndarray, keep: np.ndarray, drop: np.ndarray, mode: str = "marginalize"
+) -> np.ndarray:
+    """Information left about the ``keep`` directions once the ``drop`` ones are discarded.
+
+    Args:
+        omega: 6x6 PSD information in coordinates where ``keep`` and ``drop`` are orthonormal.
+        keep: (k, 6) orthonormal rows; drop: (6 - k, 6) orthonormal rows, complementary.
+        mode: ``"marginalize"`` (Schur complement) or ``"project"`` (``P omega P``).
+
+    Returns:
+        6x6 PSD information of rank <= k supported on span(keep).
+    """
+    if keep.shape[0] == 0:
+        return np.zeros((6, 6))
+    o_kk = keep @ omega @ keep.T
+    if mode == "marginalize" and drop.shape[0] > 0:
+        o_kd = keep @ omega @ drop.T
+        o_dd = drop @ omega @ drop.T
+        o_kk = o_kk - o_kd @ np.linalg.pinv(o_dd, rcond=1e-10, hermitian=True) @ o_kd.T
+    elif mode not in ("marginalize", "project"):
+        raise ValueError(f"unknown restriction mode {mode!r}")
+    o_kk = 0.5 * (o_kk + o_kk.T)
+    w, v = np.linalg.eigh(o_kk)
+    o_kk = (v * np.clip(w, 0.0, None)) @ v.T
+    return keep.T @ o_kk @ keep
+
+
+@dataclass
+class SubspaceSplit:
+    """LiDAR and wheel information of one increment, both 6x6 ``(v, w)`` in base_link.
+
+    Attributes:
+        lidar: positive definite information of the LiDAR factor (degenerate directions
+            removed, ``epsilon`` kept there), or None when the LiDAR constrains nothing.
+        wheel: PSD information of the wheel factor, supported on the degenerate subspace (plus
+            the optional weak part elsewhere), or None when it is zero.
+        dimension: degenerate dimension used.
+        projector_scaled: 6x6 projector onto the degenerate subspace, scaled LiDAR coordinates.
+    """
+
+    lidar: np.ndarray | None
+    wheel: np.ndarray | None
+    dimension: int
+    projector_scaled: np.ndarray
+
+
+def split_information(
+    omega_lidar: np.ndarray,
+    omega_wheel: np.ndarray | None,
+    basis_scaled: np.ndarray,
+    length: float,
+    T_base_lidar: np.ndarray,
+    *,
+    epsilon: float = 1e-6,
+    wheel_weak_scale: float = 0.0,
+    mode: str = "marginalize",
+) -> SubspaceSplit:
+    """Remove the degenerate directions from the LiDAR information and give them to the wheels.
+
+    Args:
+        omega_lidar: 6x6 information ``(v, w)`` of the LiDAR increment in the **LiDAR** body
+            frame.
+        omega_wheel: 6x6 information ``(v, w)`` of the wheel increment in **base_link**, or None.
+        basis_scaled: (k, 6) degenerate directions, scaled LiDAR body twists (need not be
+            exactly orthonormal; re-orthonormalised).
+        length: characteristic length L [m] of the scaling.
+        T_base_lidar: 4x4 pose of the LiDAR in base_link.
+        epsilon: information kept along the degenerate directions, relative to the largest
+            eigenvalue of the scaled LiDAR information (keeps it positive definite).
+        wheel_weak_scale: factor on the wheel information *outside* the degenerate subspace
+            (0 = none: the wheels then only act inside it).
+        mode: ``"marginalize"`` or ``"project"`` (see module docstring).
+    """
+    M = scaled_lidar_to_base(T_base_lidar, length)
+    Minv = np.linalg.inv(M)
+    S_inv = np.linalg.inv(scaling_matrix(length))
+    deg = orthonormal_rows(basis_scaled)
+    ok = _complement(deg)
+    P_deg = deg.T @ deg
+
+    lidar = None
+    if ok.shape[0] > 0:
+        om_s = S_inv @ omega_lidar @ S_inv  # xi_lidar = S^-1 s
+        om_s = 0.5 * (om_s + om_s.T)
+        kept = restrict_information(om_s, ok, deg, mode)
+        scale = float(np.linalg.eigvalsh(om_s).max())
+        kept = kept + epsilon * max(scale, 1e-12) * P_deg
+        lidar = Minv.T @ kept @ Minv
+        lidar = 0.5 * (lidar + lidar.T)
+
+    wheel = None
+    if omega_wheel is not None:
+        om_w = M.T @ omega_wheel @ M
+        om_w = 0.5 * (om_w + om_w.T)
+        part = restrict_information(om_w, deg, ok, mode) if deg.shape[0] else np.zeros((6, 6))
+        if wheel_weak_scale > 0.0 and ok.shape[0] > 0:
+            part = part + wheel_weak_scale * restrict_information(om_w, ok, deg, mode)
+        if np.any(part != 0.0):
+            wheel = Minv.T @ part @ Minv
+            wheel = 0.5 * (wheel + wheel.T)
+    return SubspaceSplit(lidar, wheel, int(deg.shape[0]), P_deg)
+
+
+def sqrt_information(omega: np.ndarray, rel_tol: float = 1e-12) -> np.ndarray:
+    """6x6 ``R`` with ``R^T R = omega`` for a PSD ``omega`` (zero rows for null directions).
+
+    Used for rank-deficient informations, where a Cholesky factorisation does not exist.
+    """
+    omega = 0.5 * (np.asarray(omega, dtype=float) + np.asarray(omega, dtype=float).T)
+    w, v = np.linalg.eigh(omega)
+    top = max(float(w.max()), 0.0)
+    w = np.where(w > rel_tol * top, w, 0.0)
+    return (np.sqrt(w)[:, None] * v.T)
