@@ -18,25 +18,25 @@ class RegistrationConfig:
     Attributes:
         max_iterations: ICP iteration cap per alignment.
         convergence: KISS-ICP convergence criterion (norm of the last update, m / rad).
-        max_correspondence_distance: correspondence gate [m]; None -> the map's voxel size
+        max_correspondence_distance: correspondence gate [m]; 0 -> the map's voxel size
             (KISS-ICP searches the 27 neighbouring voxels only, so a larger gate has no effect).
-        kernel: Geman-McClure kernel scale on the *squared* residual; None ->
+        kernel: Geman-McClure kernel scale on the *squared* residual; 0 ->
             ``max_correspondence_distance / 3`` (KISS-ICP's own ratio of gate to kernel).
         max_threads: TBB threads for the native code, 0 = all (set once per process).
     """
 
     max_iterations: int = 500
     convergence: float = 1e-4
-    max_correspondence_distance: float | None = None
-    kernel: float | None = None
+    max_correspondence_distance: float = 0.0
+    kernel: float = 0.0
     max_threads: int = 0
 
     def gate(self, voxel_size: float) -> float:
         d = self.max_correspondence_distance
-        return float(voxel_size if d is None else d)
+        return float(voxel_size if not d or d <= 0 else d)
 
     def kernel_for(self, voxel_size: float) -> float:
-        return float(self.gate(voxel_size) / 3.0 if self.kernel is None else self.kernel)
+        return float(self.gate(voxel_size) / 3.0 if not self.kernel or self.kernel <= 0 else self.kernel)
 
     def __post_init__(self) -> None:
         if self.max_iterations < 1:

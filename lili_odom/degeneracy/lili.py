@@ -73,12 +73,19 @@ class LiliConfig:
     )
 
     def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Raise ValueError naming the first out-of-range parameter."""
         if self.k < 2:
             raise ValueError(f"k must be >= 2, got {self.k}")
         if not 0.0 < self.tau_displacement < 1.0:
             raise ValueError(f"tau_displacement must be in (0, 1), got {self.tau_displacement}")
         if not self.tau_pca > 0.0:
             raise ValueError(f"tau_pca must be > 0, got {self.tau_pca}")
+        if self.ratio_points < 1 or self.min_points < 10:
+            raise ValueError("ratio_points must be >= 1 and min_points >= 10")
+        self.registration.__post_init__()
 
 
 def perturbation_twists(spacing: float, length: float, k: int, both_signs: bool) -> np.ndarray:

@@ -80,6 +80,7 @@ class PipelineConfig:
         if self.detection_points < 0:
             raise ValueError(f"detection_points must be >= 0, got {self.detection_points}")
         self.scan_matcher.validate()
+        self.lili.validate()
 
 
 def make_detector(config: PipelineConfig):

@@ -32,7 +32,7 @@ class ScanMatcherConfig:
 
     Attributes:
         max_range / min_range: range filter [m] (min 1.0 m drops the Husky's own body).
-        voxel_size: map voxel [m]; None -> ``max_range / 100`` as KISS-ICP does.
+        voxel_size: map voxel [m]; 0 -> ``max_range / 100`` as KISS-ICP does.
         max_points_per_voxel: map capacity per voxel.
         initial_threshold: adaptive threshold before enough motion was seen [m].
         min_motion_th: motion below which the threshold model is not updated [m].
@@ -43,7 +43,7 @@ class ScanMatcherConfig:
 
     max_range: float = 100.0
     min_range: float = 1.0
-    voxel_size: float | None = None
+    voxel_size: float = 0.0
     max_points_per_voxel: int = 20
     initial_threshold: float = 2.0
     min_motion_th: float = 0.1
@@ -54,13 +54,13 @@ class ScanMatcherConfig:
 
     @property
     def voxel(self) -> float:
-        return float(self.voxel_size if self.voxel_size else self.max_range / 100.0)
+        return float(self.voxel_size if self.voxel_size > 0 else self.max_range / 100.0)
 
     def validate(self) -> None:
         checks = {
             "max_range": self.max_range > 0,
             "min_range": 0 <= self.min_range < self.max_range,
-            "voxel_size": self.voxel_size is None or self.voxel_size > 0,
+            "voxel_size": self.voxel_size >= 0,
             "max_points_per_voxel": self.max_points_per_voxel >= 1,
             "initial_threshold": self.initial_threshold > 0,
             "min_motion_th": self.min_motion_th >= 0,

@@ -1,0 +1,221 @@
+"""The node/runner configuration: typed dataclasses mirrored by ``config/lili_odom.yaml``.
+
+The YAML uses the ROS 2 parameter-file layout (``lili_odom: ros__parameters: {...}``); nested
+mappings become dotted ROS parameter names (``pipeline.lili.k``), exactly as ``--params-file``
+does on a real ROS install. ``load_config`` / ``config_from_params`` reject unknown names and
+invalid values with a one-line message naming the parameter.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lili_odom import geometry
+from lili_odom.pipeline.odometry import PipelineConfig
+
+NODE_NAME = "lili_odom"
+
+
+def pose_from_xyz_rpy(values: typing.Sequence[float]) -> np.ndarray:
+    """4x4 from ``[x, y, z, roll, pitch, yaw]`` (m, rad; R = Rz(yaw) Ry(pitch) Rx(roll))."""
+    x, y, z, roll, pitch, yaw = (float(v) for v in values)
+    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
+                              math.cos(yaw), math.sin(yaw))
+    T = np.eye(4)
+    T[:3, :3] = [[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                 [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                 [-sp, cp * sr, cp * cr]]
+    T[:3, 3] = [x, y, z]
+    return T
+
+
+@dataclass
+class ExtrinsicsConfig:
+    """Sensor mounting, ``[x, y, z, roll, pitch, yaw]`` in metres and radians.
+
+    Used when the data carries no ``/tf_static`` (or ``use_tf_static`` is false).
+    Defaults: an OS1 on a 0.40 m mast on the Husky top plate, 0.10 m ahead of base_link
+    (robot specific: measure yours); ``os_lidar`` yawed 180 deg about z and 36.18 mm above
+    ``os_sensor``; ``os_imu`` at (6.253, -11.775, 7.645) mm from ``os_sensor`` (Ouster
+    datasheet / driver metadata).
+    """
+
+    base_to_sensor: list[float] = field(default_factory=lambda: [0.10, 0.0, 0.65, 0.0, 0.0, 0.0])
+    sensor_to_lidar: list[float] = field(
+        default_factory=lambda: [0.0, 0.0, 0.03618, 0.0, 0.0, math.pi])
+    sensor_to_imu: list[float] = field(
+        default_factory=lambda: [0.006253, -0.011775, 0.007645, 0.0, 0.0, 0.0])
+    use_tf_static: bool = True
+
+    def T_base_lidar(self) -> np.ndarray:
+        return pose_from_xyz_rpy(self.base_to_sensor) @ pose_from_xyz_rpy(self.sensor_to_lidar)
+
+    def T_base_imu(self) -> np.ndarray:
+        return pose_from_xyz_rpy(self.base_to_sensor) @ pose_from_xyz_rpy(self.sensor_to_imu)
+
+    def validate(self) -> None:
+        for name in ("base_to_sensor", "sensor_to_lidar", "sensor_to_imu"):
+            v = getattr(self, name)
+            if len(v) != 6 or not all(math.isfinite(float(x)) for x in v):
+                raise ValueError(f"extrinsics.{name} must be 6 finite numbers [x y z roll pitch yaw]")
+
+
+@dataclass
+class NodeConfig:
+    """Everything the node and the offline runner read.
+
+    Attributes:
+        lidar_topic / imu_topic / wheel_topic: inputs (design contract defaults).
+        ground_truth_topic: truth in simulated bags (offline evaluation only).
+        odom_frame: frame of the published odometry (default ``lili_odom`` so it never fights
+            the robot's own EKF ``odom -> base_link``).
+        base_frame: the robot body frame.
+        publish_tf: publish ``odom_frame -> base_frame`` on ``/tf`` when tf2_msgs exists.
+        map_publish_period_s: period of the latched ``~/map`` [s].
+        path_max_poses: poses kept in ``~/path``.
+    """
+
+    lidar_topic: str = "/ouster/points"
+    imu_topic: str = "/ouster/imu"
+    wheel_topic: str = "/platform/odom"
+    ground_truth_topic: str = "/ground_truth/odom"
+    odom_frame: str = "lili_odom"
+    base_frame: str = "base_link"
+    publish_tf: bool = True
+    map_publish_period_s: float = 2.0
+    path_max_poses: int = 20000
+    extrinsics: ExtrinsicsConfig = field(default_factory=ExtrinsicsConfig)
+    pipeline: PipelineConfig = field(default_factory=PipelineConfig)
+
+    def validate(self) -> None:
+        if not self.map_publish_period_s > 0:
+            raise ValueError("map_publish_period_s must be > 0 s")
+        if self.path_max_poses < 1:
+            raise ValueError("path_max_poses must be >= 1")
+        self.extrinsics.validate()
+        self.pipeline.validate()
+
+    def apply_extrinsics(self) -> None:
+        """Copy the configured extrinsics into the fusion configuration."""
+        self.pipeline.fusion.T_base_lidar = self.extrinsics.T_base_lidar()
+        self.pipeline.fusion.T_base_imu = self.extrinsics.T_base_imu()
+
+
+# ---------------------------------------------------------------------------------------------
+# flat dotted parameters <-> nested dataclasses
+
+def _is_dataclass_field(f: dataclasses.Field, hints: dict[str, Any]) -> bool:
+    return dataclasses.is_dataclass(hints.get(f.name))
+
+
+def flatten(obj: Any, prefix: str = "") -> dict[str, Any]:
+    """Dotted-name parameters of a config tree (numpy-array fields are derived, left out)."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        name = f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(value):
+            out.update(flatten(value, name + "."))
+        elif isinstance(value, np.ndarray):
+            continue
+        elif isinstance(value, (list, tuple)):
+            out[name] = [float(v) for v in value]
+        else:
+            out[name] = value
+    return out
+
+
+def _coerce(name: str, value: Any, current: Any) -> Any:
+    if isinstance(current, bool):
+        if not isinstance(value, bool):
+            raise ValueError(f"parameter '{name}' must be true or false, got {value!r}")
+        return value
+    if isinstance(current, int) and not isinstance(current, bool):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or int(value) != value:
+            raise ValueError(f"parameter '{name}' must be an integer, got {value!r}")
+        return int(value)
+    if isinstance(current, float) or (current is None and isinstance(value, (int, float))):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ValueError(f"parameter '{name}' must be a finite number, got {value!r}")
+        return float(value)
+    if isinstance(current, str):
+        if not isinstance(value, str):
+            raise ValueError(f"parameter '{name}' must be a string, got {value!r}")
+        return value
+    if isinstance(current, list):
+        if not isinstance(value, (list, tuple)):
+            raise ValueError(f"parameter '{name}' must be a list, got {value!r}")
+        return [float(v) for v in value]
+    return value
+
+
+def apply_params(config: NodeConfig, params: dict[str, Any]) -> NodeConfig:
+    """Set dotted parameters on ``config``; unknown names or bad values raise ValueError."""
+    known = flatten(config)
+    for name, value in params.items():
+        if name in ("use_sim_time",):
+            continue
+        if name not in known:
+            raise ValueError(f"unknown parameter '{name}'")
+        *path, leaf = name.split(".")
+        target = config
+        for part in path:
+            target = getattr(target, part)
+        setattr(target, leaf, _coerce(name, value, getattr(target, leaf)))
+    config.validate()
+    config.apply_extrinsics()
+    return config
+
+
+def _flatten_mapping(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in data.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out.update(_flatten_mapping(value, name + "."))
+        else:
+            out[name] = value
+    return out
+
+
+def load_config(path: str | Path | None = None, node_name: str = NODE_NAME) -> NodeConfig:
+    """Defaults, overridden by a ROS 2 parameter file (``node: ros__parameters: ...``)."""
+    config = NodeConfig()
+    if path is None:
+        config.validate()
+        config.apply_extrinsics()
+        return config
+    import yaml
+
+    data = yaml.safe_load(Path(path).read_text()) or {}
+    section = data.get(node_name, data.get(f"/{node_name}", data.get("/**", {})))
+    params = (section or {}).get("ros__parameters", {})
+    if not isinstance(params, dict):
+        raise ValueError(f"{path}: '{node_name}.ros__parameters' must be a mapping")
+    return apply_params(config, _flatten_mapping(params))
+
+
+def default_config_path() -> Path | None:
+    """``config/lili_odom.yaml`` of the source tree or of the installed ament share dir."""
+    here = Path(__file__).resolve().parents[1] / "config" / "lili_odom.yaml"
+    if here.is_file():
+        return here
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        p = Path(get_package_share_directory("lili_odom")) / "config" / "lili_odom.yaml"
+        return p if p.is_file() else None
+    except Exception:  # noqa: BLE001 - no ament index outside ROS
+        return None
+
+
+def geometry_check() -> None:  # pragma: no cover - documentation helper
+    """The default extrinsics are rigid transforms."""
+    c = ExtrinsicsConfig()
+    assert geometry.is_valid_pose(c.T_base_lidar()) and geometry.is_valid_pose(c.T_base_imu())

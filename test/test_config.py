@@ -1,0 +1,57 @@
+"""Configuration: the shipped YAML mirrors the dataclasses; bad parameters name themselves."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lili_odom import geometry
+from lili_odom.config import NodeConfig, apply_params, flatten, load_config, pose_from_xyz_rpy
+
+YAML = Path(__file__).resolve().parents[1] / "config" / "lili_odom.yaml"
+
+
+def test_shipped_yaml_covers_every_parameter_with_its_default():
+    import yaml
+
+    data = yaml.safe_load(YAML.read_text())["lili_odom"]["ros__parameters"]
+
+    def flat(d, prefix=""):
+        out = {}
+        for k, v in d.items():
+            out.update(flat(v, f"{prefix}{k}.") if isinstance(v, dict) else {f"{prefix}{k}": v})
+        return out
+
+    assert flat(data) == flatten(NodeConfig())
+    cfg = load_config(YAML)
+    assert cfg.pipeline.method == "lili"
+    assert geometry.is_valid_pose(cfg.pipeline.fusion.T_base_lidar)
+
+
+def test_default_extrinsics_follow_the_ouster_convention():
+    cfg = load_config(None)
+    T_sensor_lidar = pose_from_xyz_rpy(cfg.extrinsics.sensor_to_lidar)
+    # os_lidar is yawed 180 deg: its x axis points backwards in os_sensor
+    assert np.allclose(T_sensor_lidar[:3, 0], [-1, 0, 0], atol=1e-12)
+    assert T_sensor_lidar[2, 3] == pytest.approx(0.03618)
+    assert np.allclose(cfg.pipeline.fusion.T_base_lidar, cfg.extrinsics.T_base_lidar())
+
+
+@pytest.mark.parametrize("name, value, message", [
+    ("pipeline.method", "magic", "method"),
+    ("pipeline.lili.k", 1, "k"),
+    ("pipeline.lili.k", 2.5, "pipeline.lili.k"),
+    ("pipeline.scan_matcher.max_range", -5.0, "max_range"),
+    ("publish_tf", "yes", "publish_tf"),
+    ("no_such_parameter", 1, "no_such_parameter"),
+    ("extrinsics.base_to_sensor", [0, 0, 1], "base_to_sensor"),
+])
+def test_invalid_parameters_are_rejected_with_their_name(name, value, message):
+    with pytest.raises(ValueError, match=message):
+        apply_params(NodeConfig(), {name: value})
+
+
+def test_valid_override_applies():
+    cfg = apply_params(NodeConfig(), {"pipeline.method": "none", "pipeline.lili.k": 4,
+                                      "extrinsics.base_to_sensor": [0, 0, 1.0, 0, 0, 0]})
+    assert cfg.pipeline.method == "none" and cfg.pipeline.lili.k == 4
+    assert cfg.pipeline.fusion.T_base_lidar[2, 3] == pytest.approx(1.03618)
