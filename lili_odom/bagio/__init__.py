@@ -1,0 +1,1 @@
+"""rosbag2 input and output for offline runs (rosbags, no rclpy)."""

@@ -1,0 +1,172 @@
+"""``lili-odom play BAG``: publish a bag's messages on ROS topics, with ``/clock``.
+
+A small stand-in for ``ros2 bag play`` where no ros2cli exists (the pip ROS stack). Messages
+are published *raw*: the CDR bytes stored in the bag go to ``Publisher.publish(bytes)``
+unchanged, so nothing is deserialised; a publisher still needs the Python message class to
+exist (topics whose package is not installed, e.g. ``tf2_msgs`` in the pip wheels, are skipped
+with a warning).
+
+Timing follows the bag's *log* time scaled by ``--rate`` (``--rate 0`` or ``--fast``: as fast
+as possible). ``/clock`` carries the bag log time of the playback position at ``--clock-hz``
+(wall rate), so nodes with ``use_sim_time`` follow the bag. With ``--loop`` the clock jumps
+back to the start on every pass, as ``ros2 bag play --loop`` does.
+
+QoS: every publisher is RELIABLE (so reliable *and* best-effort subscribers match) with
+KEEP_LAST depth ``--qos-depth``; latched topics (``/tf_static`` and topics recorded as
+transient-local) are published TRANSIENT_LOCAL.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from lili_odom.errors import UserError
+
+help = "publish a rosbag2 bag's messages on ROS topics with /clock (no ros2cli needed)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("bag", help="rosbag2 directory or .mcap file")
+    parser.add_argument("--rate", type=float, default=1.0,
+                        help="playback speed factor (0 = as fast as possible)")
+    parser.add_argument("--fast", action="store_true", help="as fast as possible (= --rate 0)")
+    parser.add_argument("--topics", nargs="+", metavar="TOPIC", help="only these topics")
+    parser.add_argument("--loop", action="store_true", help="replay until interrupted")
+    parser.add_argument("--start", type=float, default=0.0, metavar="S",
+                        help="skip the first S seconds of the bag")
+    parser.add_argument("--clock-hz", type=float, default=100.0,
+                        help="/clock publish rate in wall Hz (0 = no /clock)")
+    parser.add_argument("--delay", type=float, default=1.0, metavar="S",
+                        help="wait S wall seconds after creating publishers, so subscribers "
+                        "can match before the first message")
+    parser.add_argument("--qos-depth", type=int, default=20, help="publisher history depth")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
+
+
+def _validate(args: argparse.Namespace) -> float:
+    rate = 0.0 if args.fast else float(args.rate)
+    if not rate >= 0.0:
+        raise UserError(f"--rate must be >= 0, got {args.rate}")
+    if not args.start >= 0.0:
+        raise UserError(f"--start must be >= 0, got {args.start}")
+    if not args.clock_hz >= 0.0:
+        raise UserError(f"--clock-hz must be >= 0, got {args.clock_hz}")
+    if args.qos_depth < 1:
+        raise UserError(f"--qos-depth must be >= 1, got {args.qos_depth}")
+    return rate
+
+
+def run(args: argparse.Namespace) -> int:
+    from lili_odom.bagio.reader import BagReader
+
+    rate = _validate(args)
+    reader = BagReader(args.bag, topics=args.topics, required=(), expected_types={})
+    with reader:
+        if reader.missing_topics:
+            raise UserError(f"{args.bag}: topic(s) not in bag: {', '.join(reader.missing_topics)}")
+        if not reader.selected_topics:
+            raise UserError(f"{args.bag}: bag has no messages to play")
+        return _play(reader, args, rate)
+
+
+def _play(reader, args: argparse.Namespace, rate: float) -> int:
+    import rclpy
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from rosgraph_msgs.msg import Clock
+
+    from lili_odom.ros.factory import MessageTypeError, message_class
+
+    def log(text: str) -> None:
+        if not args.quiet:
+            print(text, file=sys.stderr, flush=True)
+
+    context = rclpy.Context()
+    rclpy.init(args=None, context=context)
+    node = None
+    try:
+        node = rclpy.create_node("lili_odom_player", context=context,
+                                 start_parameter_services=False)
+        latched = reader.latched_topics
+        publishers = {}
+        for topic, msgtype in reader.topic_types.items():
+            if topic not in reader.selected_topics:
+                continue
+            try:
+                cls = message_class(msgtype)
+            except MessageTypeError as exc:
+                log(f"lili-odom play: skipping {topic}: {exc}")
+                continue
+            qos = QoSProfile(
+                history=HistoryPolicy.KEEP_LAST,
+                depth=max(args.qos_depth, 100) if topic in latched else args.qos_depth,
+                reliability=ReliabilityPolicy.RELIABLE,
+                durability=(DurabilityPolicy.TRANSIENT_LOCAL if topic in latched
+                            else DurabilityPolicy.VOLATILE),
+            )
+            publishers[topic] = node.create_publisher(cls, topic, qos)
+        if not publishers:
+            raise UserError(f"{args.bag}: none of the bag's message types can be published here")
+        clock_pub = None
+        if args.clock_hz > 0:
+            clock_pub = node.create_publisher(
+                Clock, "/clock", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        if args.delay > 0:
+            time.sleep(args.delay)
+
+        def publish_clock(t_ns: int) -> None:
+            if clock_pub is not None:
+                msg = Clock()
+                msg.clock.sec, msg.clock.nanosec = divmod(max(0, int(t_ns)), 1_000_000_000)
+                clock_pub.publish(msg)
+
+        bag_start = int(reader.start_time * 1e9) + int(args.start * 1e9)
+        clock_period = 1.0 / args.clock_hz if args.clock_hz > 0 else float("inf")
+        total = 0
+        passes = 0
+        wall0 = time.monotonic()
+        while True:
+            passes += 1
+            n = _one_pass(reader, publishers, publish_clock, bag_start, rate, clock_period,
+                          context)
+            total += n
+            if not args.loop or n == 0 or not context.ok():
+                break
+        log(f"lili-odom play: published {total} messages on {len(publishers)} topics "
+            f"in {time.monotonic() - wall0:.2f} s ({passes} pass{'es' if passes > 1 else ''})")
+        return 0
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def _one_pass(reader, publishers, publish_clock, bag_start: int, rate: float,
+              clock_period: float, context) -> int:
+    """Publish every message once; returns the count."""
+    wall_start = time.monotonic()
+    next_clock = wall_start
+    last_clock_bag = None
+    count = 0
+    for raw in reader.raw_messages(start=bag_start * 1e-9):
+        if not context.ok():
+            break
+        pub = publishers.get(raw.topic)
+        if pub is None:
+            continue
+        if rate > 0:
+            target = wall_start + (raw.log_time_ns - bag_start) * 1e-9 / rate
+            while True:
+                now = time.monotonic()
+                if now >= next_clock:
+                    publish_clock(bag_start + int((now - wall_start) * rate * 1e9))
+                    next_clock = now + clock_period
+                if now >= target:
+                    break
+                time.sleep(max(0.0, min(target, next_clock) - now))
+        elif last_clock_bag is None or (raw.log_time_ns - last_clock_bag) * 1e-9 >= clock_period:
+            publish_clock(raw.log_time_ns)
+            last_clock_bag = raw.log_time_ns
+        pub.publish(raw.data)
+        count += 1
+    return count

@@ -1,0 +1,1 @@
+"""The live ROS 2 node. The only package of lili_odom that imports rclpy."""

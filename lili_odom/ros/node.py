@@ -1,0 +1,360 @@
+"""The ``lili_odom`` ROS 2 node: a thin shell around the pure-Python odometry pipeline.
+
+Run: ``lili_odom_node --ros-args --params-file config/lili_odom.yaml [-p use_sim_time:=true]``
+(or ``ros2 run lili_odom lili_odom_node ...`` under colcon).
+
+Inputs (sensor-data QoS, best effort; topics are parameters):
+``lidar_topic`` (``/ouster/points``, PointCloud2), ``imu_topic`` (``/ouster/imu``, Imu),
+``wheel_topic`` (``/platform/odom``, Odometry), and ``/tf_static`` when ``use_tf_static`` is
+true and ``tf2_msgs`` is importable (received transforms are only logged and kept in
+``static_transforms``; the pipeline's extrinsics come from its parameters).
+
+Outputs (node name ``lili_odom``): ``~/odometry`` (Odometry, ``odom_frame`` -> ``base_frame``,
+every processed scan), ``~/path`` (Path, every ``path_period`` s of stamp time, at most
+``path_max_poses`` poses), ``~/map`` (PointCloud2 of the local map in ``odom_frame``, reliable +
+transient-local depth 1, every ``map_period`` s of stamp time), ``~/degeneracy`` (MarkerArray,
+see :func:`lili_odom.messages.degeneracy_markers`), ``~/degeneracy/basis`` (JSON String, see
+:func:`lili_odom.messages.degeneracy_basis_dict`) and ``/tf`` (``odom_frame`` ->
+``base_frame``) when ``publish_tf`` is true and ``tf2_msgs`` is importable.
+
+Threading: callbacks run on a single-threaded executor and only convert and buffer (IMU/wheel)
+or hand over (scans), so they are never starved by processing. One worker thread owns the
+pipeline: it drains the IMU/wheel buffers, parses the newest scan, runs the pipeline and
+publishes.
+
+Scan-drop policy: at most ONE scan waits while another is processed. A scan arriving while one
+is already waiting replaces it; the older waiting scan is dropped, counted (``scans_dropped``)
+and logged (throttled to once per 5 s). Latency therefore stays below about two scan periods
+and the node always works on the newest data.
+
+Time: all stamps come from the messages' headers; ``use_sim_time`` (standard parameter) only
+affects the node clock. When a scan stamp goes back by more than 1 s (a bag restarted) and
+``reset_on_time_jump`` is true, the pipeline and the path are reset.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import threading
+import time
+from typing import Any, Callable, Mapping
+
+import numpy as np
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
+from rcl_interfaces.msg import ParameterDescriptor
+
+from lili_odom import messages as M
+from lili_odom.pipeline.types import OdometryOutput
+from lili_odom.ros.factory import MessageTypeError, RclpyFactory, message_class
+from lili_odom.ros.params import coerce_like
+from lili_odom.ros.provider import OdometryPipelineProvider, PipelineLike, PipelineProvider
+from lili_odom.ros.queues import LatestSlot, SampleBuffer
+
+__all__ = ["LiliOdomNode", "NODE_PARAMETERS", "main", "parameters_from_mapping"]
+
+#: Node-level parameters and their defaults (pipeline parameters come from the provider).
+NODE_PARAMETERS: dict[str, Any] = {
+    "lidar_topic": "/ouster/points",
+    "imu_topic": "/ouster/imu",
+    "wheel_topic": "/platform/odom",
+    "odom_frame": "lili_odom",
+    "base_frame": "base_link",
+    "publish_tf": True,
+    "use_tf_static": False,
+    "map_period": 5.0,
+    "path_period": 1.0,
+    "path_max_poses": 2000,
+    "diagnostics_period": 10.0,
+    "reset_on_time_jump": True,
+    "marker_arrow_length": 2.0,
+}
+
+
+def _sensor_qos(depth: int) -> QoSProfile:
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+def _reliable_qos(depth: int, latched: bool = False) -> QoSProfile:
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=(DurabilityPolicy.TRANSIENT_LOCAL if latched
+                                  else DurabilityPolicy.VOLATILE))
+
+
+def _ros_value(value: Any) -> Any:
+    """A value rclpy can declare (lists made homogeneous; empty lists become unset)."""
+    if isinstance(value, (list, tuple)):
+        if not value:
+            return None
+        if all(isinstance(v, bool) for v in value):
+            return list(value)
+        if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+            return [float(v) for v in value] if any(isinstance(v, float) for v in value) \
+                else [int(v) for v in value]
+        if all(isinstance(v, str) for v in value):
+            return list(value)
+        return json.dumps(value)
+    return value
+
+
+class LiliOdomNode(Node):
+    """See the module docstring.
+
+    Args:
+        provider: source of parameter defaults and the pipeline (default: the real pipeline).
+        cloud_parser: PointCloud2 parser (default :func:`lili_odom.messages.default_cloud_parser`).
+        **kwargs: passed to ``rclpy.node.Node`` (e.g. ``context``, ``parameter_overrides``).
+    """
+
+    def __init__(self, provider: PipelineProvider | None = None,
+                 cloud_parser: M.CloudParser | None = None, **kwargs: Any) -> None:
+        super().__init__("lili_odom", **kwargs)
+        self._provider = provider or OdometryPipelineProvider()
+        self._parse = cloud_parser or M.default_cloud_parser()
+        self._factory = RclpyFactory()
+        self.p = self._declare_parameters()
+        self.pipeline: PipelineLike = self._provider.create(self.pipeline_parameters)
+
+        self.counters: dict[str, int] = {
+            "scans_received": 0, "scans_processed": 0, "scans_dropped": 0,
+            "scans_no_output": 0, "scan_errors": 0, "imu_received": 0, "wheel_received": 0,
+            "imu_errors": 0, "wheel_errors": 0, "resets": 0,
+        }
+        self._processing_time = 0.0
+        self._scans = LatestSlot()
+        self._imu = SampleBuffer(maxlen=20000)
+        self._wheel = SampleBuffer(maxlen=10000)
+        self._path: list[tuple[float, np.ndarray]] = []
+        self._last_stamp = -float("inf")
+        self._last_path_stamp = -float("inf")
+        self._last_map_stamp = -float("inf")
+        self.static_transforms: dict[tuple[str, str], np.ndarray] = {}
+
+        odom_frame = self.p["odom_frame"]
+        self.get_logger().info(f"odometry frame {odom_frame!r} -> {self.p['base_frame']!r}")
+        self.pub_odom = self.create_publisher(message_class("nav_msgs/msg/Odometry"),
+                                              "~/odometry", _reliable_qos(10))
+        self.pub_path = self.create_publisher(message_class("nav_msgs/msg/Path"), "~/path",
+                                              _reliable_qos(1))
+        self.pub_map = self.create_publisher(message_class("sensor_msgs/msg/PointCloud2"),
+                                             "~/map", _reliable_qos(1, latched=True))
+        self.pub_markers = self.create_publisher(
+            message_class("visualization_msgs/msg/MarkerArray"), "~/degeneracy",
+            _reliable_qos(5))
+        self.pub_basis = self.create_publisher(message_class("std_msgs/msg/String"),
+                                               "~/degeneracy/basis", _reliable_qos(10))
+        self.pub_tf = None
+        tf_cls = self._optional_class("tf2_msgs/msg/TFMessage")
+        if self.p["publish_tf"]:
+            if tf_cls is None:
+                self.get_logger().warn("publish_tf is true but tf2_msgs is not installed: "
+                                       "no /tf output")
+            else:
+                self.pub_tf = self.create_publisher(tf_cls, "/tf", _reliable_qos(100))
+
+        self.create_subscription(message_class("sensor_msgs/msg/PointCloud2"),
+                                 self.p["lidar_topic"], self._on_scan, _sensor_qos(2))
+        self.create_subscription(message_class("sensor_msgs/msg/Imu"), self.p["imu_topic"],
+                                 self._on_imu, _sensor_qos(200))
+        self.create_subscription(message_class("nav_msgs/msg/Odometry"), self.p["wheel_topic"],
+                                 self._on_wheel, _sensor_qos(100))
+        if self.p["use_tf_static"]:
+            if tf_cls is None:
+                self.get_logger().warn("use_tf_static is true but tf2_msgs is not installed")
+            else:
+                self.create_subscription(tf_cls, "/tf_static", self._on_tf_static,
+                                         _reliable_qos(100, latched=True))
+
+        period = float(self.p["diagnostics_period"])
+        if period > 0:
+            self.create_timer(period, self._log_diagnostics,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._stop = threading.Event()
+        self._worker = threading.Thread(target=self._work, name="lili_odom_worker", daemon=True)
+        self._worker.start()
+
+    # -- parameters ----------------------------------------------------------------------
+
+    def _declare_parameters(self) -> dict[str, Any]:
+        descriptor = ParameterDescriptor(dynamic_typing=True)
+        self._pipeline_names: list[str] = []
+        defaults = dict(NODE_PARAMETERS)
+        for name, value in self._provider.parameter_defaults().items():
+            self._pipeline_names.append(name)
+            defaults.setdefault(name, value)
+        values: dict[str, Any] = {}
+        for name, value in defaults.items():
+            self.declare_parameter(name, _ros_value(value), descriptor)
+            got = self.get_parameter(name).value
+            if name in NODE_PARAMETERS:
+                got = coerce_like(got, NODE_PARAMETERS[name], name)
+            values[name] = got
+        return values
+
+    @property
+    def pipeline_parameters(self) -> dict[str, Any]:
+        """The pipeline's parameters as set on the node (unset ones are None)."""
+        return {n: self.p[n] for n in self._pipeline_names}
+
+    def _optional_class(self, typename: str) -> type | None:
+        try:
+            return message_class(typename)
+        except MessageTypeError:
+            return None
+
+    # -- callbacks (cheap) ---------------------------------------------------------------
+
+    def _on_scan(self, msg: Any) -> None:
+        self.counters["scans_received"] += 1
+        if self._scans.put(msg):
+            self.counters["scans_dropped"] = self._scans.dropped
+            self.get_logger().warn(
+                f"processing slower than the LiDAR: dropped {self._scans.dropped} older "
+                "scan(s) so far (only the newest pending scan is kept)",
+                throttle_duration_sec=5.0)
+
+    def _on_imu(self, msg: Any) -> None:
+        try:
+            self._imu.append(M.imu_from_msg(msg))
+            self.counters["imu_received"] += 1
+        except (AttributeError, TypeError, ValueError):
+            self.counters["imu_errors"] += 1
+
+    def _on_wheel(self, msg: Any) -> None:
+        try:
+            self._wheel.append(M.wheel_from_msg(msg))
+            self.counters["wheel_received"] += 1
+        except (AttributeError, TypeError, ValueError):
+            self.counters["wheel_errors"] += 1
+
+    def _on_tf_static(self, msg: Any) -> None:
+        for parent, child, T in M.transforms_from_tf_msg(msg):
+            if (parent, child) not in self.static_transforms:
+                self.get_logger().info(f"/tf_static {parent} -> {child}: t = "
+                                       f"{np.round(T[:3, 3], 4).tolist()} m")
+            self.static_transforms[(parent, child)] = T
+
+    # -- worker --------------------------------------------------------------------------
+
+    def _work(self) -> None:
+        while not self._stop.is_set():
+            msg = self._scans.take(timeout=0.2)
+            if msg is None:
+                continue
+            t0 = time.perf_counter()
+            try:
+                self._process(msg)
+            except Exception as exc:  # noqa: BLE001 - one bad scan must not stop the node
+                self.counters["scan_errors"] += 1
+                self.get_logger().error(f"scan processing failed: {type(exc).__name__}: {exc}",
+                                        throttle_duration_sec=5.0)
+            self._processing_time += time.perf_counter() - t0
+
+    def _process(self, msg: Any) -> None:
+        scan = M.scan_from_msg(msg, self._parse)
+        if scan.stamp < self._last_stamp - 1.0 and self.p["reset_on_time_jump"]:
+            self.get_logger().warn(f"scan stamp jumped back by {self._last_stamp - scan.stamp:.2f}"
+                                   " s: resetting the pipeline")
+            self.pipeline.reset()
+            self._path.clear()
+            self._last_path_stamp = self._last_map_stamp = -float("inf")
+            self.counters["resets"] += 1
+        self._last_stamp = scan.stamp
+        for sample in self._imu.drain():
+            self.pipeline.add_imu(sample)
+        for sample in self._wheel.drain():
+            self.pipeline.add_wheel(sample)
+        out = self.pipeline.process_scan(scan)
+        self.counters["scans_processed"] += 1
+        if out is None:
+            self.counters["scans_no_output"] += 1
+            return
+        self._publish(out)
+
+    def _publish(self, out: OdometryOutput) -> None:
+        f, p = self._factory, self.p
+        frame = p["odom_frame"]
+        self.pub_odom.publish(M.odometry_msg(f, out, frame, p["base_frame"]))
+        self.pub_markers.publish(M.degeneracy_markers(f, out, frame,
+                                                      float(p["marker_arrow_length"])))
+        self.pub_basis.publish(M.degeneracy_json_msg(f, out))
+        if self.pub_tf is not None:
+            self.pub_tf.publish(M.tf_message(f, [(out.stamp, frame, p["base_frame"], out.pose)]))
+        self._path.append((out.stamp, np.asarray(out.pose, dtype=np.float64)))
+        if out.stamp - self._last_path_stamp >= float(p["path_period"]):
+            from lili_odom.bagio.writer import thin_poses
+
+            poses = thin_poses(self._path, int(p["path_max_poses"]))
+            self.pub_path.publish(M.path_msg(f, poses, frame, out.stamp))
+            self._last_path_stamp = out.stamp
+        if out.stamp - self._last_map_stamp >= float(p["map_period"]):
+            points = np.asarray(self.pipeline.local_map_points(), dtype=np.float64)
+            self.pub_map.publish(M.pointcloud_xyz_msg(f, points, out.stamp, frame))
+            self._last_map_stamp = out.stamp
+
+    # -- diagnostics and shutdown --------------------------------------------------------
+
+    def diagnostics(self) -> dict[str, Any]:
+        """Node counters plus the pipeline's counters (prefixed ``pipeline.``)."""
+        out: dict[str, Any] = dict(self.counters)
+        out["scans_dropped"] = self._scans.dropped
+        out["imu_overflow"] = self._imu.overflow
+        out["wheel_overflow"] = self._wheel.overflow
+        n = max(1, out["scans_processed"])
+        out["mean_processing_s"] = round(self._processing_time / n, 4)
+        for k, v in dict(getattr(self.pipeline, "counters", {}) or {}).items():
+            out[f"pipeline.{k}"] = v
+        return out
+
+    def _log_diagnostics(self) -> None:
+        self.get_logger().info("diagnostics " + json.dumps(self.diagnostics(), default=str))
+
+    def shutdown(self, timeout: float = 5.0) -> None:
+        """Stop the worker thread (waits for the scan in progress)."""
+        self._stop.set()
+        self._scans.close()
+        if self._worker.is_alive():
+            self._worker.join(timeout)
+
+    def destroy_node(self) -> None:
+        self.shutdown()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None,
+         provider_factory: Callable[[], PipelineProvider] | None = None) -> int:
+    """Console entry point ``lili_odom_node`` (accepts ``--ros-args ...``)."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        try:
+            node = LiliOdomNode(provider=provider_factory() if provider_factory else None)
+        except (ImportError, RuntimeError, ValueError, TypeError) as exc:
+            print(f"lili_odom_node: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+            return 1
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+def parameters_from_mapping(values: Mapping[str, Any]) -> list[Parameter]:
+    """``{name: value}`` -> rclpy parameter overrides (for tests and embedding)."""
+    return [Parameter(k, value=_ros_value(v)) for k, v in values.items()]
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
