@@ -6,9 +6,10 @@ not de-skewed). Ring 0 is the top beam. Column j looks at azimuth ``2 pi (1 - j 
 measured ``j * period / cols`` seconds after the scan start.
 
 Return model: true range + Gaussian noise, quantised to mm. A pixel returns when the range is
-within [min_range, R_eff] with ``R_eff = max_range * sqrt(rho cos(incidence) / rho_ref)``
-(inverse-square link budget: 120 m at 80 %, ~42 m at 10 %, matching the OS1 datasheet), with a
-soft edge, plus a small random dropout. Simplifications: beams all start at the lidar origin
+within [min_range, R_eff] with ``R_eff = max_range * sqrt(rho sqrt(cos(incidence)) / rho_ref)``
+(inverse-square link budget: 120 m at 80 %, ~42 m at 10 % at normal incidence, matching the OS1
+datasheet; ``sqrt(cos)`` is a rough-surface backscatter law), with a soft edge, plus a small
+random dropout. Simplifications: beams all start at the lidar origin
 (the OS1's 15.8 mm beam-origin offset and per-beam azimuth offsets are not modelled), no
 multi-return, no blooming, no self-occlusion by the robot.
 """
@@ -116,7 +117,9 @@ class LidarSimulator:
         rho = np.where(hit, mesh.reflectivity.astype(np.float32)[mat], np.float32(0.0))
         cosi = np.abs((self.caster.normals[pi] * dw).sum(-1, dtype=np.float32))
         cosi = np.clip(cosi, 1e-3, 1.0)
-        r_eff = cfg.max_range * np.sqrt(np.minimum(rho * cosi / cfg.max_range_reflectivity, 1.0))
+        # rough-surface backscatter ~ rho * sqrt(cos): real concrete/gravel return more at grazing
+        # incidence than a Lambertian model, so ground rings reach ~25 m as on a real OS1
+        r_eff = cfg.max_range * np.sqrt(np.minimum(rho * np.sqrt(cosi) / cfg.max_range_reflectivity, 1.0))
         # one batch of random numbers per scan: uniform (detection) and 4 standard normals
         u = rng.random((rows, cols), dtype=np.float32)
         z = rng.standard_normal((4, rows, cols), dtype=np.float32)
@@ -129,7 +132,7 @@ class LidarSimulator:
         xyz = r_q[..., None] * self.directions32
         xyz[~ok] = np.nan
         # photometric channels
-        sig = self.SIGNAL_GAIN * rho * cosi / np.maximum(r_q, 1.0) ** 2 * (1.0 + 0.05 * z[1])
+        sig = self.SIGNAL_GAIN * rho * np.sqrt(cosi) / np.maximum(r_q, 1.0) ** 2 * (1.0 + 0.05 * z[1])
         intensity = np.where(ok, np.clip(np.round(sig), 1, 65535), 0).astype(np.float32)
         refl = np.where(ok, np.clip(np.round(100.0 * rho * (1.0 + 0.03 * z[2])), 1, 255), 0)
         outdoor = hit & mesh.outdoor[mat]

@@ -124,7 +124,7 @@ class WheelOdomConfig:
     slip_rate_hz: float = 1.0 / 40.0  # occasional slip events (Poisson), while moving
     slip_duration_range: tuple[float, float] = (0.3, 1.5)  # s
     slip_speed_gain_range: tuple[float, float] = (0.1, 0.35)  # measured speed over-reads by this
-    slip_yaw_rate_sigma: float = 0.08  # rad/s spurious yaw rate during a slip
+    slip_yaw_rate_sigma: float = 0.03  # rad/s spurious yaw rate during a slip (one side spins)
 
 
 @dataclass

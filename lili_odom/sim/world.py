@@ -91,6 +91,7 @@ class CrossSection:
     wall_material: str = "concrete"
     floor_material: str = "floor"
     end_wall: bool = True
+    start_wall: bool = False
     end_material: str = "rock"
 
 
@@ -624,12 +625,11 @@ def _build_tube(b: _Builder, world: WorldDescription, floor: FloorField, density
     for mask, mat in ((~floor_quad, cs.wall_material), (floor_quad, cs.floor_material)):
         sel = keep & mask[None, :]
         b.add(flat_v, F[:, sel].reshape(-1, 3), mat)
-    if cs.end_wall:
-        ring = V[-1]
-        centre = ring.mean(0)
-        verts = np.vstack([ring, centre])
-        j = np.arange(M)
-        b.add(verts, np.stack([np.full(M, M), j, (j + 1) % M], -1), cs.end_material)
+    for flag, ring in ((cs.end_wall, V[-1]), (cs.start_wall, V[0])):
+        if flag:
+            verts = np.vstack([ring, ring.mean(0)])
+            j = np.arange(M)
+            b.add(verts, np.stack([np.full(M, M), j, (j + 1) % M], -1), cs.end_material)
     for spec, sf, side in extra:
         _add_feature(b, line, floor, cs, spec, sf, side)
 
