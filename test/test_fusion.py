@@ -402,3 +402,38 @@ def test_wheel_buffer_interpolation_and_rejection() -> None:
         rot_z(0.5 * 0.789), (0.789, 0.2 * 0.789, 0))
     np.testing.assert_allclose(d, expect, atol=2e-4)
     assert buf.delta(0.5, 2.0) is None  # beyond the data
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_random_garbage_never_raises_and_recovers(seed: int) -> None:
+    """Random stamps, IMU, wheel poses, LiDAR poses, bases and informations, some corrupt."""
+    rng = np.random.default_rng(seed)
+    est = FusionEstimator(config(T_base_lidar=MOUNT))
+    feed_imu(est, -1.0, 0.0, (0.0, 0.0, G))
+    est.initialize(0.0)
+    bad = [np.nan, np.inf, -np.inf, 1e300, -1e300, 0.0, 1e-300]
+    t = 0.0
+    for _ in range(200):
+        t += rng.choice([0.1, 0.1, 0.1, -0.05, 0.0, 3.0])
+        for j in range(10):
+            acc = rng.normal(size=3) * rng.choice([1.0, 1e6, np.nan]) + [0, 0, G]
+            est.add_imu(t - 0.1 + 0.01 * j + rng.normal() * 0.02, acc, rng.normal(size=3) * 0.1)
+        est.add_wheel(t, exp(rng.normal(size=6) * rng.choice([0.1, 1e3])))
+        T = exp(rng.normal(size=6) * rng.choice([0.1, 10.0, 1e4]))
+        if rng.random() < 0.2:
+            T[rng.integers(3), rng.integers(4)] = rng.choice(bad)
+        basis = rng.normal(size=(rng.integers(0, 7), 6))
+        if rng.random() < 0.1 and basis.size:
+            basis[0, 0] = rng.choice(bad)
+        deg = SimpleNamespace(basis_scaled=basis, characteristic_length=rng.choice(
+            [10.0, 0.0, -1.0, np.nan, 1e-9, 1e9]))
+        info = rng.normal(size=(6, 6)) * rng.choice([1.0, 1e12]) if rng.random() < 0.2 else None
+        out = est.update(t, T, deg, lidar_information=info)
+        if out is not None:
+            assert np.all(np.isfinite(out.pose)) and np.all(np.isfinite(out.covariance))
+        P = est.predict(t + 0.05)
+        assert P is not None and np.all(np.isfinite(P))
+    # sane data afterwards is fused again
+    feed_imu(est, t, t + 1.0, (0.0, 0.0, G))
+    ok = [est.update(t + 0.1 * k, est.last_output.pose) for k in range(1, 6)]
+    assert all(o is not None and o.used_imu for o in ok)

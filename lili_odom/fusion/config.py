@@ -88,6 +88,12 @@ class FusionConfig:
         relinearize_threshold: iSAM2 relinearisation threshold.
         extra_iterations: additional iSAM2 update() calls per update (helps large corrections).
         history_size: fused keyframe poses kept for ``predict`` at past times.
+        max_speed: plausibility gate [m/s]: a LiDAR or wheel increment implying more than
+            ``max_speed * dt + gate_margin_translation`` is rejected (a Husky does 1 m/s).
+        max_rate: plausibility gate [rad/s] on the rotation of an increment, with
+            ``gate_margin_rotation``.
+        gate_margin_translation: [m] added to the translation gate.
+        gate_margin_rotation: [rad] added to the rotation gate.
     """
 
     imu: ImuNoiseConfig = field(default_factory=ImuNoiseConfig)
@@ -114,3 +120,7 @@ class FusionConfig:
     relinearize_threshold: float = 0.05
     extra_iterations: int = 1
     history_size: int = 50
+    max_speed: float = 5.0
+    max_rate: float = 5.0
+    gate_margin_translation: float = 1.0
+    gate_margin_rotation: float = 0.5

@@ -112,9 +112,12 @@ def _as_pose(T: Any) -> np.ndarray | None:
         return None
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
         return None
-    R = T[:3, :3]
-    if not np.allclose(R.T @ R, np.eye(3), atol=1e-3) or np.linalg.det(R) < 0.5:
+    if np.abs(T[:3, 3]).max() > 1e7:  # beyond any odometry frame; would overflow later
         return None
+    R = T[:3, :3]
+    with np.errstate(over="ignore", invalid="ignore"):
+        if not np.allclose(R.T @ R, np.eye(3), atol=1e-3) or np.linalg.det(R) < 0.5:
+            return None
     if not np.allclose(T[3], [0, 0, 0, 1], atol=1e-6):
         return None
     return orthonormalize(T)
@@ -167,6 +170,7 @@ class FusionStats:
     n_solver_failures: int = 0
     n_resets: int = 0
     n_reset_fallbacks: int = 0
+    last_failure: str = ""
 
 
 @dataclass
@@ -197,7 +201,8 @@ class FusionEstimator:
         cfg = self.config
         self.T_base_lidar = orthonormalize(cfg.T_base_lidar)
         self.T_base_imu = orthonormalize(cfg.T_base_imu)
-        self.imu = ImuBuffer(cfg.imu.buffer_seconds)
+        self.imu = ImuBuffer(cfg.imu.buffer_seconds, max_abs_acc=cfg.imu.max_abs_acc,
+                             max_abs_gyro=cfg.imu.max_abs_gyro)
         self.wheels = WheelBuffer(cfg.wheel)
         self.stats = FusionStats()
         self._params = make_preintegration_params(cfg.imu, self.T_base_imu)
@@ -206,6 +211,7 @@ class FusionEstimator:
         self._since_reset = 0
         self._history: deque[tuple[float, np.ndarray]] = deque(maxlen=max(2, cfg.history_size))
         self._body_rate = np.zeros(6)  # (v, w) per second, base_link, previous interval
+        self._consecutive_failures = 0
         self.last_output: FusionOutput | None = None
 
     # ---------------------------------------------------------------------------------------
@@ -374,9 +380,10 @@ class FusionEstimator:
                 length = float(degeneracy.characteristic_length)
             except (AttributeError, TypeError, ValueError):
                 basis, length = np.full((1, 6), np.nan), math.nan
-            if not (_finite(basis) and math.isfinite(length) and length > 0.0):
+            if not (_finite(basis) and math.isfinite(length) and 1e-3 <= length <= 1e6):
                 self.stats.n_rejected_basis += 1
-                notes.append("degeneracy basis rejected (non-finite); LiDAR factor dropped")
+                notes.append("degeneracy basis rejected (non-finite or absurd length); "
+                             "LiDAR factor dropped")
                 T_meas = None
                 basis = np.zeros((0, 6))
                 length = cfg.lidar.default_length
@@ -391,6 +398,12 @@ class FusionEstimator:
                 self.stats.n_rejected_lidar_information += 1
                 notes.append("LiDAR information rejected; using the configured one")
 
+        if T_meas is not None and not self._plausible(np.linalg.inv(T_prev) @ T_meas, dt):
+            self.stats.n_rejected_lidar += 1
+            notes.append("LiDAR pose rejected (implausible jump from the previous fused pose)")
+            T_meas = None
+            basis = np.zeros((0, 6))
+
         # -- wheel increment ------------------------------------------------------------------
         delta_w = None
         if wheel_delta is not None:
@@ -402,6 +415,10 @@ class FusionEstimator:
             delta_w = self.wheels.delta(prev.t, t)
             if delta_w is not None:
                 delta_w = _as_pose(delta_w)
+        if delta_w is not None and not self._plausible(delta_w, dt):
+            self.stats.n_rejected_wheel += 1
+            notes.append("wheel increment rejected (implausible)")
+            delta_w = None
         if delta_w is None:
             self.stats.n_no_wheel += 1
         omega_wheel = None
@@ -427,85 +444,112 @@ class FusionEstimator:
                 mode=cfg.lidar.restriction,
             )
 
-        # -- motion: IMU preintegration or fallback ------------------------------------------
-        graph = gtsam.NonlinearFactorGraph()
-        values = gtsam.Values()
-        used_imu = False
-        pim = None
-        if cfg.use_imu and dt <= cfg.max_interval_s:
-            pim = gtsam.PreintegratedCombinedMeasurements(self._params, prev.bias)
-            rep = integrate(self.imu, pim, prev.t, t, cfg.imu.max_gap_s,
-                            cfg.imu.max_extrapolation_s)
-            used_imu = rep.covered
-            if not used_imu:
-                notes.append(f"no IMU: {rep.reason}")
-        if used_imu:
-            graph.add(gtsam.CombinedImuFactor(X(i - 1), V(i - 1), X(i), V(i), B(i - 1), B(i), pim))
-            nav = pim.predict(gtsam.NavState(prev.pose, prev.velocity), prev.bias)
-            pose_guess, vel_guess = nav.pose(), np.asarray(nav.velocity())
-        else:
-            self.stats.n_no_imu += 1
-            if delta_w is not None:
-                motion = delta_w
-                notes.append("no IMU: wheel increment covers the LiDAR-blind directions")
+        # A graph that the IMU factor makes unsolvable (corrupt but finite samples) is retried
+        # once with the no-IMU fallback before the update is given up.
+        out = None
+        for allow_imu in (True, False):
+            # -- motion: IMU preintegration or fallback ------------------------------------------
+            graph = gtsam.NonlinearFactorGraph()
+            values = gtsam.Values()
+            used_imu = False
+            pim = None
+            if allow_imu and cfg.use_imu and dt <= cfg.max_interval_s:
+                pim = gtsam.PreintegratedCombinedMeasurements(self._params, prev.bias)
+                rep = integrate(self.imu, pim, prev.t, t, cfg.imu.max_gap_s,
+                                cfg.imu.max_extrapolation_s)
+                used_imu = rep.covered
+                if not used_imu:
+                    notes.append(f"no IMU: {rep.reason}")
+            if used_imu:
+                graph.add(gtsam.CombinedImuFactor(X(i - 1), V(i - 1), X(i), V(i), B(i - 1), B(i), pim))
+                nav = pim.predict(gtsam.NavState(prev.pose, prev.velocity), prev.bias)
+                pose_guess, vel_guess = nav.pose(), np.asarray(nav.velocity())
             else:
-                motion = exp(self._body_rate * dt)
-                s_t = max(cfg.no_imu_sigma_floor_translation,
-                          cfg.no_imu_sigma_translation_per_s * dt)
-                s_r = max(cfg.no_imu_sigma_floor_rotation, cfg.no_imu_sigma_rotation_per_s * dt)
-                omega_cv = np.diag([s_t**-2] * 3 + [s_r**-2] * 3)
-                # like the wheels, the motion model only acts where the LiDAR is blind, so a
-                # LiDAR/motion-model disagreement elsewhere cannot leak into those directions
-                cv = split_information(
-                    omega_lidar, omega_cv, basis if T_meas is not None else np.eye(6), length,
-                    self.T_base_lidar, mode=cfg.lidar.restriction,
-                ).wheel
-                if cv is not None:
-                    graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(motion),
-                                                       _noise_from_information(cv)))
-                notes.append("no IMU: constant-velocity motion model")
-            pose_guess = prev.pose.compose(gtsam.Pose3(motion))
-            vel_guess = T_prev[:3, :3] @ motion[:3, 3] / dt
-            graph.add(gtsam.PriorFactorVector(
-                V(i), vel_guess, gtsam.noiseModel.Isotropic.Sigma(3, cfg.no_imu_sigma_velocity)))
-            rw = np.array([cfg.imu.accel_bias_random_walk] * 3 + [cfg.imu.gyro_bias_random_walk] * 3)
-            graph.add(gtsam.BetweenFactorConstantBias(
-                B(i - 1), B(i), gtsam.imuBias.ConstantBias(),
-                gtsam.noiseModel.Diagonal.Sigmas(np.maximum(rw * math.sqrt(dt), 1e-9))))
+                self.stats.n_no_imu += 1
+                if delta_w is not None:
+                    motion = delta_w
+                    notes.append("no IMU: wheel increment covers the LiDAR-blind directions")
+                else:
+                    motion = exp(self._body_rate * dt)
+                    s_t = max(cfg.no_imu_sigma_floor_translation,
+                              cfg.no_imu_sigma_translation_per_s * dt)
+                    s_r = max(cfg.no_imu_sigma_floor_rotation, cfg.no_imu_sigma_rotation_per_s * dt)
+                    omega_cv = np.diag([s_t**-2] * 3 + [s_r**-2] * 3)
+                    # like the wheels, the motion model only acts where the LiDAR is blind, so a
+                    # LiDAR/motion-model disagreement elsewhere cannot leak into those directions
+                    cv = split_information(
+                        omega_lidar, omega_cv, basis if T_meas is not None else np.eye(6), length,
+                        self.T_base_lidar, mode=cfg.lidar.restriction,
+                    ).wheel
+                    if cv is not None:
+                        graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(motion),
+                                                           _noise_from_information(cv)))
+                    notes.append("no IMU: constant-velocity motion model")
+                pose_guess = prev.pose.compose(gtsam.Pose3(motion))
+                vel_guess = T_prev[:3, :3] @ motion[:3, 3] / dt
+                graph.add(gtsam.PriorFactorVector(
+                    V(i), vel_guess, gtsam.noiseModel.Isotropic.Sigma(3, cfg.no_imu_sigma_velocity)))
+                rw = np.array([cfg.imu.accel_bias_random_walk] * 3 + [cfg.imu.gyro_bias_random_walk] * 3)
+                graph.add(gtsam.BetweenFactorConstantBias(
+                    B(i - 1), B(i), gtsam.imuBias.ConstantBias(),
+                    gtsam.noiseModel.Diagonal.Sigmas(np.maximum(rw * math.sqrt(dt), 1e-9))))
 
-        # -- LiDAR and wheel factors ---------------------------------------------------------
-        used_lidar = split.lidar is not None
-        if used_lidar:
-            Z = np.linalg.inv(T_prev) @ T_meas
-            graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(orthonormalize(Z)),
-                                               _noise_from_information(split.lidar)))
-        used_wheel = split.wheel is not None and delta_w is not None
-        if used_wheel:
-            graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(delta_w),
-                                               _noise_from_information(split.wheel)))
+            # -- LiDAR and wheel factors ---------------------------------------------------------
+            used_lidar = split.lidar is not None
+            if used_lidar:
+                Z = np.linalg.inv(T_prev) @ T_meas
+                graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(orthonormalize(Z)),
+                                                   _noise_from_information(split.lidar)))
+            used_wheel = split.wheel is not None and delta_w is not None
+            if used_wheel:
+                graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(delta_w),
+                                                   _noise_from_information(split.wheel)))
 
-        values.insert(X(i), pose_guess)
-        values.insert(V(i), np.asarray(vel_guess, dtype=float))
-        values.insert(B(i), prev.bias)
-        try:
-            self._isam.update(graph, values)
-            for _ in range(max(0, cfg.extra_iterations)):
-                self._isam.update()
-            out = self._commit(t, i, notes, split.dimension, used_lidar, used_imu, used_wheel)
-        except (RuntimeError, ValueError, IndexError) as exc:
-            out = None
-            notes.append(f"solver failure: {exc}")
+            values.insert(X(i), pose_guess)
+            values.insert(V(i), np.asarray(vel_guess, dtype=float))
+            values.insert(B(i), prev.bias)
+            try:
+                self._isam.update(graph, values)
+                for _ in range(max(0, cfg.extra_iterations)):
+                    self._isam.update()
+                out = self._commit(t, i, notes, split.dimension, used_lidar, used_imu, used_wheel)
+            except (RuntimeError, ValueError, IndexError) as exc:
+                out = None
+                self.stats.last_failure = " ".join(str(exc).split())[:200]
+            else:
+                if out is None:
+                    self.stats.last_failure = "non-finite or implausible estimate"
+            if out is not None or not used_imu:
+                break
+            self._recover(prev)
+            notes = notes + ["IMU factor made the update unsolvable; retried without it"]
         if out is None:
             self.stats.n_solver_failures += 1
             self._recover(prev)
             return None
         self.stats.n_updates += 1
-        self._body_rate = log(np.linalg.inv(T_prev) @ out.pose) / dt
+        self._consecutive_failures = 0
+        rate = log(np.linalg.inv(T_prev) @ out.pose) / dt
+        # the constant-velocity fallback never extrapolates faster than the plausibility gates
+        for part, limit in ((slice(0, 3), cfg.max_speed), (slice(3, 6), cfg.max_rate)):
+            n = float(np.linalg.norm(rate[part]))
+            if n > limit:
+                rate[part] *= limit / n
+        self._body_rate = rate
         self.imu.discard_before(prev.t - 1.0)
         self._since_reset += 1
         if self._since_reset >= max(1, cfg.reset_every):
             self._reset()
         return out
+
+    def _plausible(self, delta: np.ndarray, dt: float) -> bool:
+        """True when the increment (4x4) is physically possible within ``dt`` seconds."""
+        cfg = self.config
+        trans = float(np.linalg.norm(delta[:3, 3]))
+        cos_angle = 0.5 * (float(np.trace(delta[:3, :3])) - 1.0)
+        angle = math.acos(min(1.0, max(-1.0, cos_angle)))
+        return (trans <= cfg.max_speed * dt + cfg.gate_margin_translation
+                and angle <= cfg.max_rate * dt + cfg.gate_margin_rotation)
 
     # ---------------------------------------------------------------------------------------
     # bookkeeping
@@ -519,7 +563,7 @@ class FusionEstimator:
         bias = est.atConstantBias(B(i))
         cov_g = np.asarray(self._isam.marginalCovariance(X(i)), dtype=float)
         T = matrix(pose)
-        if not _finite(T, vel, bias.vector(), cov_g):
+        if not _finite(T, vel, bias.vector(), cov_g) or not self._sane(T, vel, bias, cov_g):
             return None
         self._state = _State(t, i, pose, vel, bias, cov_g)
         self._history.append((t, T))
@@ -532,6 +576,19 @@ class FusionEstimator:
         )
         self.last_output = out
         return out
+
+    def _sane(self, T: np.ndarray, vel: np.ndarray, bias: gtsam.imuBias.ConstantBias,
+              cov_g: np.ndarray) -> bool:
+        """Reject finite but absurd estimates (they would poison every later update)."""
+        cfg = self.config
+        return bool(
+            np.abs(T[:3, 3]).max() < 1e7
+            and np.linalg.norm(vel) < 10.0 * cfg.max_speed + 10.0
+            and np.abs(bias.accelerometer()).max() < cfg.imu.max_abs_acc
+            and np.abs(bias.gyroscope()).max() < cfg.imu.max_abs_gyro
+            and np.diag(cov_g).min() >= 0.0
+            and np.diag(cov_g).max() < 1e12
+        )
 
     def _reset(self) -> None:
         """Rebuild iSAM2 from the joint marginal of the newest (X, V, B)."""
@@ -564,7 +621,9 @@ class FusionEstimator:
         cfg = self.config
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
-        cov = 0.5 * (s.cov_gtsam + s.cov_gtsam.T) + 1e-12 * np.eye(6)
+        cov = 0.5 * (s.cov_gtsam + s.cov_gtsam.T)
+        w, v = np.linalg.eigh(cov)
+        cov = (v * np.clip(w, 1e-12, 1e6)) @ v.T  # well-conditioned: never an unsolvable prior
         try:
             pose_noise = gtsam.noiseModel.Gaussian.Covariance(cov)
         except RuntimeError:
@@ -582,7 +641,16 @@ class FusionEstimator:
         return isam
 
     def _recover(self, prev: _State) -> None:
-        """After a solver failure: restart from the last good state."""
+        """After a solver failure: restart from the last good state.
+
+        After ``3`` failures in a row the velocity, bias and motion model are also reset
+        (zero, with loose priors), so a poisoned state cannot block the estimator for good.
+        """
+        self._consecutive_failures += 1
+        self._body_rate = np.zeros(6)
+        if self._consecutive_failures >= 3:
+            prev = _State(prev.t, prev.index, prev.pose, np.zeros(3),
+                          gtsam.imuBias.ConstantBias(), prev.cov_gtsam)
         self._state = prev
         try:
             self._isam = self._priors_isam(prev)

@@ -61,6 +61,10 @@ class ImuNoiseConfig:
         max_extrapolation_s: how far [s] the first/last sample may be held constant to cover
             the ends of an interval.
         buffer_seconds: samples older than the newest minus this [s] are dropped.
+        max_abs_acc: samples with a larger specific-force component [m/s^2] are rejected as
+            corrupt (the ICM-20948 saturates at 16 g = 157 m/s^2).
+        max_abs_gyro: samples with a larger rate component [rad/s] are rejected (the sensor
+            saturates at 2000 deg/s = 34.9 rad/s).
     """
 
     accel_noise_density: float = 1.0e-2
@@ -74,6 +78,8 @@ class ImuNoiseConfig:
     max_gap_s: float = 0.25
     max_extrapolation_s: float = 0.05
     buffer_seconds: float = 30.0
+    max_abs_acc: float = 160.0
+    max_abs_gyro: float = 35.0
 
 
 def make_preintegration_params(
@@ -121,13 +127,18 @@ class ImuBuffer:
     """Time-ordered IMU samples with robust insertion.
 
     ``add`` keeps the buffer sorted even when samples arrive out of order, drops exact
-    duplicates (same stamp within 1 us) and non-finite samples, and prunes samples older than
+    duplicates (same stamp within 1 us), non-finite samples and samples beyond the sensor's
+    range (``max_abs_acc`` [m/s^2], ``max_abs_gyro`` [rad/s]), and prunes samples older than
     ``buffer_seconds`` before the newest. Counters say what happened.
     """
 
-    def __init__(self, buffer_seconds: float = 30.0, max_samples: int = 20000) -> None:
+    def __init__(self, buffer_seconds: float = 30.0, max_samples: int = 20000,
+                 max_abs_acc: float = 160.0, max_abs_gyro: float = 35.0) -> None:
         self.buffer_seconds = float(buffer_seconds)
         self.max_samples = int(max_samples)
+        self.max_abs_acc = float(max_abs_acc)
+        self.max_abs_gyro = float(max_abs_gyro)
+        self.n_out_of_range = 0
         self._t: list[float] = []
         self._s: list[ImuSample] = []
         self.n_added = 0
@@ -157,6 +168,9 @@ class ImuBuffer:
             return False
         if not (math.isfinite(t) and np.all(np.isfinite(acc)) and np.all(np.isfinite(gyro))):
             self.n_nonfinite += 1
+            return False
+        if np.abs(acc).max() > self.max_abs_acc or np.abs(gyro).max() > self.max_abs_gyro:
+            self.n_out_of_range += 1
             return False
         i = bisect.bisect_left(self._t, t)
         if (i < len(self._t) and abs(self._t[i] - t) < 1e-6) or (
