@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 
-from lili_odom import geometry
 from lili_odom.pipeline.odometry import PipelineConfig
 
 NODE_NAME = "lili_odom"
@@ -215,7 +214,39 @@ def default_config_path() -> Path | None:
         return None
 
 
-def geometry_check() -> None:  # pragma: no cover - documentation helper
-    """The default extrinsics are rigid transforms."""
-    c = ExtrinsicsConfig()
-    assert geometry.is_valid_pose(c.T_base_lidar()) and geometry.is_valid_pose(c.T_base_imu())
+
+
+YAML_HEADER = """\
+# lili_odom parameters (ROS 2 parameter-file layout).
+#   ros2 run lili_odom lili_odom_node --ros-args --params-file config/lili_odom.yaml
+#   lili-odom run BAG --config config/lili_odom.yaml
+# Every value below is the built-in default (lili_odom/config.py and the dataclasses it nests);
+# regenerate with `python -m lili_odom.config > config/lili_odom.yaml`. Units are SI (m, s,
+# rad). Extrinsics are [x, y, z, roll, pitch, yaw]; the bag's or robot's /tf_static replaces
+# them when extrinsics.use_tf_static is true and it is available.
+"""
+
+
+def default_yaml() -> str:
+    """The parameter file holding every default, nested as ROS expects."""
+    import yaml
+
+    class _Dumper(yaml.SafeDumper):
+        pass
+
+    _Dumper.add_representer(
+        list, lambda d, v: d.represent_sequence("tag:yaml.org,2002:seq", v, flow_style=True))
+    nested: dict[str, Any] = {}
+    for name, value in flatten(NodeConfig()).items():
+        node = nested
+        *path, leaf = name.split(".")
+        for part in path:
+            node = node.setdefault(part, {})
+        node[leaf] = value
+    body = yaml.dump({NODE_NAME: {"ros__parameters": nested}}, Dumper=_Dumper, sort_keys=False,
+                     default_flow_style=False, width=100)
+    return YAML_HEADER + body
+
+
+if __name__ == "__main__":
+    print(default_yaml(), end="")

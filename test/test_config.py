@@ -13,6 +13,10 @@ YAML = Path(__file__).resolve().parents[1] / "config" / "lili_odom.yaml"
 def test_shipped_yaml_covers_every_parameter_with_its_default():
     import yaml
 
+    from lili_odom.config import default_yaml
+
+    assert YAML.read_text() == default_yaml(), "regenerate: python -m lili_odom.config > config/lili_odom.yaml"
+
     data = yaml.safe_load(YAML.read_text())["lili_odom"]["ros__parameters"]
 
     def flat(d, prefix=""):
