@@ -18,6 +18,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/config/worlds", glob("config/worlds/*.yaml")),
     ],
     python_requires=">=3.10",
     install_requires=[

@@ -4,7 +4,7 @@ Public API:
 
 * ``SimRequest`` — what to simulate (world, trial, seed, resolution, feature density, window).
 * ``simulate_bag(request, out, progress=True, jobs=1) -> BagSummary`` — write one bag.
-* ``ensure_trial_bag(trial, cache_dir="data/sim", **request_fields) -> Path`` — generate or
+* ``ensure_trial_bag(trial, cache_dir=None, **request_fields) -> Path`` — generate or
   reuse a cached bag; the cache key holds every parameter, the seed and the simulator code
   version (hash of the simulator sources and of the world file).
 
@@ -21,6 +21,7 @@ import json
 import os
 import shutil
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -36,7 +37,7 @@ from lili_odom.sim.trajectory import Trajectory
 from lili_odom.sim.wheels import simulate_wheel_odom
 
 __all__ = ["EPOCH_NS", "SimRequest", "BagSummary", "Simulation", "simulate_bag", "ensure_trial_bag",
-           "code_version", "cache_key"]
+           "default_cache_dir", "code_version", "cache_key"]
 
 EPOCH_NS = 1_700_000_000 * 1_000_000_000  # 2023-11-14T22:13:20Z, trial time 0
 
@@ -204,7 +205,18 @@ def simulate_bag(req: SimRequest, out: Path | str, progress: bool = True, jobs: 
         import multiprocessing as mp
 
         pool = mp.get_context("spawn").Pool(jobs, initializer=_worker_init, initargs=(req,))
-        scan_iter = pool.imap(_worker_scan, [float(t) for t in scan_t], chunksize=1)
+
+        def bounded(times, window=2 * jobs + 1):
+            """Ordered results with at most ``window`` clouds in flight (bounded memory)."""
+            pending = deque()
+            for t in times:
+                pending.append(pool.apply_async(_worker_scan, (float(t),)))
+                if len(pending) >= window:
+                    yield pending.popleft().get()
+            while pending:
+                yield pending.popleft().get()
+
+        scan_iter = bounded(scan_t)
     else:
         pool = None
         scan_iter = (msgs.serialize(msgs.pointcloud2(sim.scan(float(t)), _ns(float(t)))) for t in scan_t)
@@ -265,7 +277,19 @@ def simulate_bag(req: SimRequest, out: Path | str, progress: bool = True, jobs: 
                              "path_length_m": traj.path_length(), "trial_duration_s": traj.duration})
 
 
-def ensure_trial_bag(trial: int, cache_dir: Path | str = "data/sim", *, world: str = "tunnel", seed: int = 0,
+def default_cache_dir() -> Path:
+    """``$LILI_ODOM_SIM_CACHE``, else ``data/sim`` of the source checkout (gitignored), else
+    ``data/sim`` under the current directory."""
+    env = os.environ.get("LILI_ODOM_SIM_CACHE")
+    if env:
+        return Path(env)
+    root = Path(__file__).resolve().parents[2]
+    if (root / "setup.py").exists() and (root / "lili_odom").is_dir():
+        return root / "data" / "sim"
+    return Path("data") / "sim"
+
+
+def ensure_trial_bag(trial: int, cache_dir: Path | str | None = None, *, world: str = "tunnel", seed: int = 0,
                      resolution: tuple[int, int] | str = (128, 1024), feature_density: float | None = None,
                      start: float = 0.0, duration: float | None = None, progress: bool = True,
                      jobs: int | None = None) -> Path:
@@ -281,7 +305,7 @@ def ensure_trial_bag(trial: int, cache_dir: Path | str = "data/sim", *, world: s
         resolution = parse_resolution(resolution)
     req = SimRequest(world=world, trial=int(trial), seed=int(seed), resolution=tuple(resolution),
                      feature_density=feature_density, start=float(start), duration=duration)
-    cache_dir = Path(cache_dir)
+    cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     name = f"{Path(world).stem}_trial{trial}_{resolution[0]}x{resolution[1]}_seed{seed}_{cache_key(req)}"
     final = cache_dir / name
     if (final / "metadata.yaml").exists():

@@ -7,7 +7,8 @@ Examples::
     lili-odom simulate tunnel --trial 3 --resolution 32x512 --out bags/x   # explicit output dir
     lili-odom simulate tunnel --world corridor --trial 1 --feature-density 0
 
-Without ``--out`` the bag goes to the cache (``--cache-dir``, default ``data/sim``) and an
+Without ``--out`` the bag goes to the cache (``--cache-dir``, default ``data/sim`` of the
+checkout or ``$LILI_ODOM_SIM_CACHE``) and an
 existing bag with the same parameters and simulator version is reused. The path of the bag is
 printed on the last line of stdout.
 """
@@ -25,13 +26,13 @@ __all__ = ["add_arguments", "run", "ensure_trial_bag"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("world_name", nargs="?", default=None, metavar="WORLD",
-                        help="world name under config/worlds (default: tunnel; --world FILE overrides)")
     parser.add_argument("--trial", type=int, default=1,
                         help="trial of the world: 1 = 260 m pass, 2 = 430 m round trip, 3 = short entrance piece")
-    parser.add_argument("--world", default=None, help="world description YAML file or name")
+    parser.add_argument("--world", default="tunnel",
+                        help="world: a name under config/worlds (tunnel, corridor, open_field) or a YAML file")
     parser.add_argument("--out", type=Path, default=None, help="output bag directory (must not exist)")
-    parser.add_argument("--cache-dir", type=Path, default=Path("data/sim"), help="cache used without --out")
+    parser.add_argument("--cache-dir", type=Path, default=None,
+                        help="cache used without --out (default: $LILI_ODOM_SIM_CACHE or data/sim of the checkout)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (trajectory details and all noise)")
     parser.add_argument("--start", type=float, default=0.0, help="start of the piece [s of trial time]")
     parser.add_argument("--duration", type=float, default=None, help="length of the piece [s] (default: to the end)")
@@ -45,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    world = args.world or args.world_name or "tunnel"
+    world = args.world
     try:
         resolution = parse_resolution(args.resolution)
     except ValueError as exc:
