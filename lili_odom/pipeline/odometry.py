@@ -127,15 +127,16 @@ class OdometryPipeline:
         """Replace the extrinsics (e.g. from ``/tf_static``); resets the estimator state."""
         self.config.fusion.T_base_lidar = geometry.orthonormalize(T_base_lidar)
         self.config.fusion.T_base_imu = geometry.orthonormalize(T_base_imu)
-        self.reset()
+        self.reset(count=False)
 
-    def reset(self) -> None:
+    def reset(self, count: bool = True) -> None:
         """Forget map, state and buffers (clock jump backwards, new bag loop)."""
         self._matcher.reset()
         self._new_estimator()
         self._last_stamp = None
         self._last_output = None
-        self.counters["resets"] += 1
+        if count:
+            self.counters["resets"] += 1
 
     def add_imu(self, sample: ImuSample) -> None:
         if not self.estimator.add_imu(sample.stamp, sample.linear_acceleration, sample.angular_velocity):

@@ -1,0 +1,1 @@
+"""Trajectory metrics (via evo) and plots for offline runs and benchmarks."""
