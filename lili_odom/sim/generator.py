@@ -173,9 +173,10 @@ def simulate_bag(req: SimRequest, out: Path | str, progress: bool = True, jobs: 
     msgs = MessageFactory()
     t0, t1 = sim.window()
     traj = sim.trajectory
-    imu = simulate_imu(traj, S.extrinsics.base_to_imu, S.imu, req.seed, t_end=t1 + 0.05)
-    wheels = simulate_wheel_odom(traj, S.wheels, req.seed, t_end=t1 + 0.05)
-    t_truth = np.arange(0.0, t1 + 1e-9, 1.0 / S.truth_rate_hz)
+    # IMU and wheels are always simulated over the whole trial, so a piece equals a window of it
+    imu = simulate_imu(traj, S.extrinsics.base_to_imu, S.imu, req.seed)
+    wheels = simulate_wheel_odom(traj, S.wheels, req.seed)
+    t_truth = np.arange(0.0, traj.duration + 1e-9, 1.0 / S.truth_rate_hz)
     scan_t = sim.scan_starts()
 
     def sel(t):
@@ -191,8 +192,9 @@ def simulate_bag(req: SimRequest, out: Path | str, progress: bool = True, jobs: 
     events += [(_ns(t), 4, k) for k, t in enumerate(scan_t)]
     heapq.heapify(events)
 
-    kin = traj.kinematics(t_truth[ti]) if len(ti) else None
-    truth_row = {int(i): r for r, i in enumerate(ti)}
+    # truth over the whole trial too (bit-identical values whatever the window)
+    kin = traj.kinematics(t_truth)
+    truth_row = {int(i): int(i) for i in ti}
 
     gyro_var, accel_var = S.imu.gyro_sigma ** 2, S.imu.accel_sigma ** 2
     W = S.wheels
