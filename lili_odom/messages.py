@@ -435,11 +435,15 @@ def _translation(p: np.ndarray) -> np.ndarray:
 # clouds and tf
 
 
-def pointcloud_xyz_msg(f: MessageFactory, points: np.ndarray, t: float, frame_id: str) -> Any:
-    """(N, 3) points [m] -> unorganized ``sensor_msgs/PointCloud2`` with float32 x, y, z."""
+def pointcloud_xyz_msg(f: MessageFactory, points: np.ndarray, t: float, frame_id: str,
+                       times: np.ndarray | None = None) -> Any:
+    """(N, 3) points [m] -> unorganized ``sensor_msgs/PointCloud2`` with float32 x, y, z.
+
+    With ``times`` (N,) [s from ``t``] a float32 ``time`` field is added.
+    """
     from lili_odom.pointcloud2 import encode_xyz_cloud
 
-    content = encode_xyz_cloud(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+    content = encode_xyz_cloud(np.asarray(points, dtype=np.float64).reshape(-1, 3), times)
     fields = [f.new("sensor_msgs/msg/PointField", name=s.name, offset=s.offset,
                     datatype=s.datatype, count=s.count) for s in content.fields]
     return f.new(

@@ -1,49 +1,32 @@
-"""Node plumbing without DDS: parameter flattening and the scan hand-over policy."""
+"""Node plumbing without DDS: static transform chains and the scan hand-over policy."""
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass, field
 
 import numpy as np
-import pytest
 
-from lili_odom.ros.params import build_config, coerce_like, flatten_config
 from lili_odom.ros.queues import LatestSlot, SampleBuffer
+from lili_odom.ros.static_tf import lookup
 
 
-@dataclass
-class Inner:
-    max_range: float = 100.0
-    voxel_size: float | None = None
-    deskew: bool = True
+def _T(t=(0.0, 0.0, 0.0), yaw=0.0) -> np.ndarray:
+    T = np.eye(4)
+    c, s_ = np.cos(yaw), np.sin(yaw)
+    T[:3, :3] = [[c, -s_, 0], [s_, c, 0], [0, 0, 1]]
+    T[:3, 3] = t
+    return T
 
 
-@dataclass
-class Outer:
-    method: str = "lili"
-    iterations: int = 5
-    extrinsic: np.ndarray = field(default_factory=lambda: np.eye(4))
-    matcher: Inner = field(default_factory=Inner)
-
-
-def test_flatten_and_build_round_trip():
-    flat = flatten_config(Outer())
-    assert flat["matcher.max_range"] == 100.0 and flat["matcher.voxel_size"] is None
-    assert len(flat["extrinsic"]) == 16
-    cfg = build_config(Outer, {"matcher.max_range": 80, "iterations": 7.0, "method": "zhang",
-                               "matcher.voxel_size": 0.5, "extrinsic": list(range(16)),
-                               "unknown.name": 1})
-    assert cfg.matcher.max_range == 80.0 and isinstance(cfg.matcher.max_range, float)
-    assert cfg.iterations == 7 and cfg.method == "zhang" and cfg.matcher.voxel_size == 0.5
-    assert cfg.extrinsic.shape == (4, 4) and cfg.extrinsic[3, 3] == 15
-
-
-def test_coerce_errors_name_the_parameter():
-    with pytest.raises(ValueError, match="matcher.max_range"):
-        coerce_like("far", 1.0, "matcher.max_range")
-    with pytest.raises(ValueError):
-        coerce_like(2.5, 3, "iterations")
-    assert coerce_like("false", True) is False
+def test_static_tf_lookup_composes_chain_both_directions():
+    tfs = {("base_link", "os_sensor"): _T((0.1, 0, 0.65)),
+           ("os_sensor", "os_lidar"): _T((0, 0, 0.036), np.pi),
+           ("os_sensor", "os_imu"): _T((0.006, -0.012, 0.008))}
+    T = lookup(tfs, "base_link", "os_lidar")
+    np.testing.assert_allclose(T, tfs[("base_link", "os_sensor")] @ tfs[("os_sensor", "os_lidar")])
+    back = lookup(tfs, "os_lidar", "os_imu")
+    np.testing.assert_allclose(T @ back, lookup(tfs, "base_link", "os_imu"), atol=1e-12)
+    assert lookup(tfs, "base_link", "camera") is None
+    np.testing.assert_allclose(lookup({}, "a", "a"), np.eye(4))
 
 
 def test_latest_slot_keeps_newest_and_counts_drops():

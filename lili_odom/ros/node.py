@@ -5,14 +5,17 @@ Run: ``lili_odom_node --ros-args --params-file config/lili_odom.yaml [-p use_sim
 
 Inputs (sensor-data QoS, best effort; topics are parameters):
 ``lidar_topic`` (``/ouster/points``, PointCloud2), ``imu_topic`` (``/ouster/imu``, Imu),
-``wheel_topic`` (``/platform/odom``, Odometry), and ``/tf_static`` when ``use_tf_static`` is
-true and ``tf2_msgs`` is importable (received transforms are only logged and kept in
-``static_transforms``; the pipeline's extrinsics come from its parameters).
+``wheel_topic`` (``/platform/odom``, Odometry), and ``/tf_static`` when
+``extrinsics.use_tf_static`` is true and ``tf2_msgs`` is importable: once ``base_frame`` ->
+lidar frame and ``base_frame`` -> IMU frame are both known (frames from the messages' headers),
+they replace the configured extrinsics through ``pipeline.set_extrinsics`` (applied by the
+worker between scans). Without tf2_msgs (the pip ROS stack) the extrinsics parameters rule.
 
 Outputs (node name ``lili_odom``): ``~/odometry`` (Odometry, ``odom_frame`` -> ``base_frame``,
 every processed scan), ``~/path`` (Path, every ``path_period`` s of stamp time, at most
-``path_max_poses`` poses), ``~/map`` (PointCloud2 of the local map in ``odom_frame``, reliable +
-transient-local depth 1, every ``map_period`` s of stamp time), ``~/degeneracy`` (MarkerArray,
+``path_max_poses`` poses, evenly thinned), ``~/map`` (PointCloud2 of the local map in
+``odom_frame``, reliable + transient-local depth 1, every ``map_publish_period_s`` s of stamp
+time), ``~/degeneracy`` (MarkerArray,
 see :func:`lili_odom.messages.degeneracy_markers`), ``~/degeneracy/basis`` (JSON String, see
 :func:`lili_odom.messages.degeneracy_basis_dict`) and ``/tf`` (``odom_frame`` ->
 ``base_frame``) when ``publish_tf`` is true and ``tf2_msgs`` is importable.
@@ -28,11 +31,16 @@ and logged (throttled to once per 5 s). Latency therefore stays below about two 
 and the node always works on the newest data.
 
 Time: all stamps come from the messages' headers; ``use_sim_time`` (standard parameter) only
-affects the node clock. When a scan stamp goes back by more than 1 s (a bag restarted) and
-``reset_on_time_jump`` is true, the pipeline and the path are reset.
+affects the node clock. When a scan stamp goes back by more than 1 s (a bag restarted), the
+pipeline and the path are reset.
+
+Parameters: the provider's (``lili_odom.config.NodeConfig``'s dotted names, as in
+``config/lili_odom.yaml``) plus :data:`NODE_PARAMETERS`; all are declared with dynamic typing
+and validated by the provider, so a bad value stops the node with a one-line error.
 """
 from __future__ import annotations
 
+import array
 import json
 import sys
 import threading
@@ -51,13 +59,15 @@ from rcl_interfaces.msg import ParameterDescriptor
 from lili_odom import messages as M
 from lili_odom.pipeline.types import OdometryOutput
 from lili_odom.ros.factory import MessageTypeError, RclpyFactory, message_class
-from lili_odom.ros.params import coerce_like
 from lili_odom.ros.provider import OdometryPipelineProvider, PipelineLike, PipelineProvider
 from lili_odom.ros.queues import LatestSlot, SampleBuffer
+from lili_odom.ros.static_tf import lookup
 
 __all__ = ["LiliOdomNode", "NODE_PARAMETERS", "main", "parameters_from_mapping"]
 
-#: Node-level parameters and their defaults (pipeline parameters come from the provider).
+#: Parameters the node itself reads, with fallback defaults. All but the last three are also
+#: ``lili_odom.config.NodeConfig`` fields (the provider's defaults win); ``path_period``,
+#: ``diagnostics_period`` and ``marker_arrow_length`` exist only on the node.
 NODE_PARAMETERS: dict[str, Any] = {
     "lidar_topic": "/ouster/points",
     "imu_topic": "/ouster/imu",
@@ -65,12 +75,11 @@ NODE_PARAMETERS: dict[str, Any] = {
     "odom_frame": "lili_odom",
     "base_frame": "base_link",
     "publish_tf": True,
-    "use_tf_static": False,
-    "map_period": 5.0,
+    "map_publish_period_s": 2.0,
+    "path_max_poses": 20000,
+    "extrinsics.use_tf_static": True,
     "path_period": 1.0,
-    "path_max_poses": 2000,
     "diagnostics_period": 10.0,
-    "reset_on_time_jump": True,
     "marker_arrow_length": 2.0,
 }
 
@@ -120,7 +129,7 @@ class LiliOdomNode(Node):
         self._parse = cloud_parser or M.default_cloud_parser()
         self._factory = RclpyFactory()
         self.p = self._declare_parameters()
-        self.pipeline: PipelineLike = self._provider.create(self.pipeline_parameters)
+        self.pipeline: PipelineLike = self._provider.create(dict(self.p))
 
         self.counters: dict[str, int] = {
             "scans_received": 0, "scans_processed": 0, "scans_dropped": 0,
@@ -136,6 +145,9 @@ class LiliOdomNode(Node):
         self._last_path_stamp = -float("inf")
         self._last_map_stamp = -float("inf")
         self.static_transforms: dict[tuple[str, str], np.ndarray] = {}
+        self._frames = {"lidar": "os_lidar", "imu": "os_imu"}
+        self._pending_extrinsics: tuple[np.ndarray, np.ndarray] | None = None
+        self._applied_extrinsics: tuple[np.ndarray, np.ndarray] | None = None
 
         odom_frame = self.p["odom_frame"]
         self.get_logger().info(f"odometry frame {odom_frame!r} -> {self.p['base_frame']!r}")
@@ -165,9 +177,10 @@ class LiliOdomNode(Node):
                                  self._on_imu, _sensor_qos(200))
         self.create_subscription(message_class("nav_msgs/msg/Odometry"), self.p["wheel_topic"],
                                  self._on_wheel, _sensor_qos(100))
-        if self.p["use_tf_static"]:
+        if self.p["extrinsics.use_tf_static"]:
             if tf_cls is None:
-                self.get_logger().warn("use_tf_static is true but tf2_msgs is not installed")
+                self.get_logger().info("tf2_msgs is not installed: extrinsics come from the "
+                                       "parameters, not /tf_static")
             else:
                 self.create_subscription(tf_cls, "/tf_static", self._on_tf_static,
                                          _reliable_qos(100, latched=True))
@@ -184,24 +197,19 @@ class LiliOdomNode(Node):
 
     def _declare_parameters(self) -> dict[str, Any]:
         descriptor = ParameterDescriptor(dynamic_typing=True)
-        self._pipeline_names: list[str] = []
         defaults = dict(NODE_PARAMETERS)
-        for name, value in self._provider.parameter_defaults().items():
-            self._pipeline_names.append(name)
-            defaults.setdefault(name, value)
+        defaults.update(self._provider.parameter_defaults())
         values: dict[str, Any] = {}
         for name, value in defaults.items():
             self.declare_parameter(name, _ros_value(value), descriptor)
             got = self.get_parameter(name).value
-            if name in NODE_PARAMETERS:
-                got = coerce_like(got, NODE_PARAMETERS[name], name)
+            if isinstance(got, (array.array, tuple)):
+                got = list(got)
+            if name in NODE_PARAMETERS and got is not None:
+                got = _coerce(name, got, NODE_PARAMETERS[name])
             values[name] = got
         return values
 
-    @property
-    def pipeline_parameters(self) -> dict[str, Any]:
-        """The pipeline's parameters as set on the node (unset ones are None)."""
-        return {n: self.p[n] for n in self._pipeline_names}
 
     def _optional_class(self, typename: str) -> type | None:
         try:
@@ -221,6 +229,7 @@ class LiliOdomNode(Node):
                 throttle_duration_sec=5.0)
 
     def _on_imu(self, msg: Any) -> None:
+        self._frames["imu"] = str(msg.header.frame_id) or self._frames["imu"]
         try:
             self._imu.append(M.imu_from_msg(msg))
             self.counters["imu_received"] += 1
@@ -240,6 +249,11 @@ class LiliOdomNode(Node):
                 self.get_logger().info(f"/tf_static {parent} -> {child}: t = "
                                        f"{np.round(T[:3, 3], 4).tolist()} m")
             self.static_transforms[(parent, child)] = T
+        base = self.p["base_frame"]
+        T_lidar = lookup(self.static_transforms, base, self._frames["lidar"])
+        T_imu = lookup(self.static_transforms, base, self._frames["imu"])
+        if T_lidar is not None and T_imu is not None:
+            self._pending_extrinsics = (T_lidar, T_imu)
 
     # -- worker --------------------------------------------------------------------------
 
@@ -259,7 +273,9 @@ class LiliOdomNode(Node):
 
     def _process(self, msg: Any) -> None:
         scan = M.scan_from_msg(msg, self._parse)
-        if scan.stamp < self._last_stamp - 1.0 and self.p["reset_on_time_jump"]:
+        self._frames["lidar"] = scan.frame_id or self._frames["lidar"]
+        self._apply_extrinsics()
+        if scan.stamp < self._last_stamp - 1.0:
             self.get_logger().warn(f"scan stamp jumped back by {self._last_stamp - scan.stamp:.2f}"
                                    " s: resetting the pipeline")
             self.pipeline.reset()
@@ -294,10 +310,25 @@ class LiliOdomNode(Node):
             poses = thin_poses(self._path, int(p["path_max_poses"]))
             self.pub_path.publish(M.path_msg(f, poses, frame, out.stamp))
             self._last_path_stamp = out.stamp
-        if out.stamp - self._last_map_stamp >= float(p["map_period"]):
+        if len(self._path) > 4 * int(p["path_max_poses"]):  # bound memory on long runs
+            from lili_odom.bagio.writer import thin_poses
+
+            self._path = thin_poses(self._path, 2 * int(p["path_max_poses"]))
+        if out.stamp - self._last_map_stamp >= float(p["map_publish_period_s"]):
             points = np.asarray(self.pipeline.local_map_points(), dtype=np.float64)
             self.pub_map.publish(M.pointcloud_xyz_msg(f, points, out.stamp, frame))
             self._last_map_stamp = out.stamp
+
+    def _apply_extrinsics(self) -> None:
+        pending, self._pending_extrinsics = self._pending_extrinsics, None
+        if pending is None or not hasattr(self.pipeline, "set_extrinsics"):
+            return
+        if self._applied_extrinsics is not None and all(
+                np.allclose(a, b, atol=1e-9) for a, b in zip(pending, self._applied_extrinsics)):
+            return
+        self.pipeline.set_extrinsics(*pending)
+        self._applied_extrinsics = pending
+        self.get_logger().info("extrinsics taken from /tf_static")
 
     # -- diagnostics and shutdown --------------------------------------------------------
 
@@ -349,6 +380,27 @@ def main(args: list[str] | None = None,
             node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def _coerce(name: str, value: Any, default: Any) -> Any:
+    """A node parameter value converted to the type of its default (ValueError names it)."""
+    try:
+        if isinstance(default, bool):
+            if not isinstance(value, bool):
+                raise ValueError
+            return value
+        if isinstance(default, int):
+            if isinstance(value, bool) or int(value) != value:
+                raise ValueError
+            return int(value)
+        if isinstance(default, float):
+            if isinstance(value, bool):
+                raise ValueError
+            return float(value)
+        return type(default)(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"parameter '{name}' must be a {type(default).__name__}, "
+                         f"got {value!r}") from None
 
 
 def parameters_from_mapping(values: Mapping[str, Any]) -> list[Parameter]:

@@ -3,19 +3,15 @@
 The node asks a :class:`PipelineProvider` for the parameter names and defaults to declare, and
 then for a pipeline built from the parameter values it ended up with. The default,
 :class:`OdometryPipelineProvider`, serves :class:`lili_odom.pipeline.odometry.OdometryPipeline`
-with its config dataclass (found through the ``config`` annotation of its constructor); tests
-pass a provider of a fake pipeline instead.
+configured by :class:`lili_odom.config.NodeConfig`; tests pass a provider of a fake pipeline.
 """
 from __future__ import annotations
 
-import inspect
-import typing
 from typing import Any, Mapping, Protocol
 
 import numpy as np
 
 from lili_odom.pipeline.types import ImuSample, OdometryOutput, Scan, WheelSample
-from lili_odom.ros.params import build_config, flatten_config
 
 __all__ = ["PipelineLike", "PipelineProvider", "OdometryPipelineProvider"]
 
@@ -45,30 +41,27 @@ class PipelineProvider(Protocol):
 
 
 class OdometryPipelineProvider:
-    """Serves the real ``OdometryPipeline`` (imported lazily)."""
+    """Serves the real ``OdometryPipeline`` configured through ``lili_odom.config.NodeConfig``.
 
-    def _classes(self) -> tuple[type, type]:
-        from lili_odom.pipeline.odometry import OdometryPipeline
-
-        hints = typing.get_type_hints(OdometryPipeline.__init__)
-        config_cls = hints.get("config")
-        if config_cls is None:
-            params = list(inspect.signature(OdometryPipeline.__init__).parameters.values())
-            raise RuntimeError("OdometryPipeline.__init__ has no annotated 'config' argument "
-                               f"(parameters: {[p.name for p in params]})")
-        args = typing.get_args(config_cls)  # Optional[Config] -> Config
-        if args:
-            config_cls = next(a for a in args if a is not type(None))
-        return OdometryPipeline, config_cls
+    The parameters are NodeConfig's dotted names (``lidar_topic``, ``extrinsics.*``,
+    ``pipeline.lili.k`` ...), the same as ``config/lili_odom.yaml``. ``create`` applies only the
+    names NodeConfig knows (node-only extras such as ``path_period`` are ignored here) and
+    raises ``ValueError`` naming a bad parameter.
+    """
 
     def parameter_defaults(self) -> dict[str, Any]:
-        _, config_cls = self._classes()
-        return flatten_config(config_cls())
+        from lili_odom.config import NodeConfig, flatten
+
+        return flatten(NodeConfig())
+
+    def node_config(self, parameters: Mapping[str, Any]) -> Any:
+        from lili_odom.config import NodeConfig, apply_params, flatten
+
+        known = flatten(NodeConfig())
+        values = {k: v for k, v in parameters.items() if k in known and v is not None}
+        return apply_params(NodeConfig(), values)
 
     def create(self, parameters: Mapping[str, Any]) -> PipelineLike:
-        pipeline_cls, config_cls = self._classes()
-        config = build_config(config_cls, parameters)
-        validate = getattr(config, "validate", None)
-        if callable(validate):
-            validate()
-        return pipeline_cls(config)
+        from lili_odom.pipeline.odometry import OdometryPipeline
+
+        return OdometryPipeline(self.node_config(parameters).pipeline)
