@@ -14,6 +14,7 @@ the figures because the benchmark machine may be shared.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import shutil
@@ -25,7 +26,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from lili_odom.sim.generator import SimRequest, Simulation, simulate_bag  # noqa: E402
+from lili_odom.sim.generator import SimRequest, Simulation, default_cache_dir, simulate_bag  # noqa: E402
 from lili_odom.sim.sensors import parse_resolution  # noqa: E402
 
 PLACES = {"entrance (outside, t = 0-10 s)": 0.0, "inside the tunnel (t = 80-90 s)": 80.0}
@@ -84,6 +85,16 @@ def main(argv=None) -> int:
     ]
     for name, so, b1, b2 in rows:
         lines.append(f"| {name} | {so:.1f} | {b1[0]:.1f} | {b2[0]:.1f} | {b1[2] / 1e6:.2f} |")
+    full = sorted(default_cache_dir().glob("tunnel_trial1_128x1024_seed0_*.json"))
+    if full:
+        side = json.loads(full[-1].read_text())
+        n = side["counts"]["/ouster/points"]
+        lines += [
+            "",
+            f"Full trial 1 (`lili-odom simulate tunnel --trial 1`, 2 processes, cached bag of {side['code_version']}): "
+            f"{n} scans ({side['window_s'][1]:.0f} s of data) in {side['wall_time_s']:.0f} s = "
+            f"{n / side['wall_time_s']:.1f} scans/s ({side['window_s'][1] / side['wall_time_s']:.2f} x real time).",
+        ]
     lines += [
         "",
         "Sensor model = poses of the 1024 columns, Embree ray casting of all beams, the return model.",

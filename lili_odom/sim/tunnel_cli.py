@@ -39,7 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resolution", default="128x1024", help="ROWSxCOLS, e.g. 128x1024, 64x512, 32x512")
     parser.add_argument("--feature-density", type=float, default=None,
                         help="inside features per nominal spacing (0 = featureless tunnel; default: world's)")
-    parser.add_argument("--jobs", type=int, default=None, help="ray-casting processes (default: min(2, cores))")
+    parser.add_argument("--jobs", type=int, default=None, help="ray-casting processes (default: min(2, cores); 1 for pieces under 5 s)")
     parser.add_argument("--zstd-level", type=int, default=None,
                         help="zstd level for the mcap chunks (default 2); 19 for small committed bags")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -53,7 +53,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(str(exc)) from exc
     if args.feature_density is not None and args.feature_density < 0:
         raise UserError("--feature-density must be >= 0")
-    jobs = args.jobs if args.jobs is not None else min(2, os.cpu_count() or 1)
+    jobs = args.jobs
+    if jobs is None:  # a second process pays off only past its start-up (~2 s)
+        short = args.duration is not None and args.duration < 5.0
+        jobs = 1 if short else min(2, os.cpu_count() or 1)
     try:
         if args.out is None:
             if args.zstd_level is not None:
