@@ -23,7 +23,15 @@ from kiss_icp.threshold import AdaptiveThreshold
 from kiss_icp.voxelization import voxel_down_sample
 
 from lili_odom.degeneracy.reference import AlignmentResult, GuardedRegistration, ReferenceMap
-from lili_odom.geometry import is_valid_pose, orthonormalize
+from lili_odom.geometry import is_valid_pose, log, orthonormalize
+
+
+def geometry_log_safe(T: np.ndarray) -> np.ndarray:
+    """SE(3) log, or NaNs when it cannot be taken (never raises)."""
+    try:
+        return log(T)
+    except Exception:  # noqa: BLE001
+        return np.full(6, np.nan)
 
 
 @dataclass
@@ -115,10 +123,16 @@ class ScanMatcher:
             the last point, its 0.5-voxel downsampling (to insert in the map) and its 1.5-voxel
             downsampling (to register).
         """
-        if times is None or len(times) != len(points) or np.ptp(times) <= 0:
-            times = np.zeros(len(points))
+        times = None if times is None else np.asarray(times, dtype=float).reshape(-1)
+        if (times is None or len(times) != len(points) or len(times) == 0
+                or not np.all(np.isfinite(times)) or np.ptp(times) <= 0):
+            # KISS-ICP normalises times by their span: a zero span gives 0/0 and a NaN rotation
+            # that aborts the process inside Sophus. An empty time array skips deskewing.
+            times = np.zeros(0)
         motion = orthonormalize(sweep_motion) if is_valid_pose(sweep_motion, 1e-3) else np.eye(4)
-        frame = self._preprocessor.preprocess(points, np.asarray(times, dtype=float), motion)
+        if not np.all(np.isfinite(geometry_log_safe(motion))):
+            motion = np.eye(4)
+        frame = self._preprocessor.preprocess(points, times, motion)
         v = self.config.voxel
         map_points = voxel_down_sample(frame, 0.5 * v)
         source = voxel_down_sample(map_points, 1.5 * v)
