@@ -142,3 +142,20 @@ def test_sensor_models_are_deterministic_per_seed(traj1):
     t = np.linspace(0, 100, 777)
     assert np.array_equal(Trajectory(world, world.trials[1], seed=3).pose(t), Trajectory(world, world.trials[1], seed=3).pose(t))
     assert not np.allclose(Trajectory(world, world.trials[1], seed=4).pose(t), Trajectory(world, world.trials[1], seed=3).pose(t))
+
+
+@pytest.mark.parametrize("name", ["tunnel", "corridor", "open_field"])
+def test_every_shipped_trial_is_a_valid_husky_motion(name):
+    world = load_world(name)
+    for trial, plan in world.trials.items():
+        traj = Trajectory(world, plan, seed=1)
+        t = np.arange(0.0, traj.duration, 0.05)
+        k = traj.kinematics(t)
+        assert np.all(np.isfinite(k.position)) and np.all(np.isfinite(k.omega))
+        speed = np.linalg.norm(k.velocity, axis=1)
+        assert speed.max() <= plan.speed_range[1] * 1.05 + 1e-6, (name, trial)
+        assert np.linalg.norm(k.acceleration, axis=1).max() < 1.6 * plan.max_accel, (name, trial)
+        assert speed[0] < 1e-6 and speed[-1] < 1e-6  # starts and ends at rest
+        # no side slip: body velocity is along base_link x
+        v_body = np.einsum("nji,nj->ni", k.rotation, k.velocity)
+        assert np.abs(v_body[:, 1]).max() < 0.02
