@@ -38,8 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--clock-hz", type=float, default=100.0,
                         help="/clock publish rate in wall Hz (0 = no /clock)")
     parser.add_argument("--delay", type=float, default=1.0, metavar="S",
-                        help="wait S wall seconds after creating publishers, so subscribers "
-                        "can match before the first message")
+                        help="wait up to S wall seconds after creating publishers, until every "
+                        "topic has a matched subscriber, before the first message")
     parser.add_argument("--qos-depth", type=int, default=20, help="publisher history depth")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
 
@@ -99,7 +99,10 @@ def _play(reader, args: argparse.Namespace, rate: float) -> int:
                 continue
             qos = QoSProfile(
                 history=HistoryPolicy.KEEP_LAST,
-                depth=max(args.qos_depth, 100) if topic in latched else args.qos_depth,
+                # small messages get a deep history so a reliable reader that falls behind
+                # (or a lost packet to repair) does not lose samples; clouds keep --qos-depth
+                depth=(args.qos_depth if msgtype == "sensor_msgs/msg/PointCloud2"
+                       else max(args.qos_depth, 1000)),
                 reliability=ReliabilityPolicy.RELIABLE,
                 durability=(DurabilityPolicy.TRANSIENT_LOCAL if topic in latched
                             else DurabilityPolicy.VOLATILE),
@@ -112,7 +115,14 @@ def _play(reader, args: argparse.Namespace, rate: float) -> int:
             clock_pub = node.create_publisher(
                 Clock, "/clock", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         if args.delay > 0:
-            time.sleep(args.delay)
+            # Discovery takes a variable time; a fixed sleep loses the first messages on a
+            # loaded machine. Stop waiting as soon as every data topic has a subscriber.
+            deadline = time.monotonic() + args.delay
+            while time.monotonic() < deadline and not all(
+                    p.get_subscription_count() > 0 for p in publishers.values()):
+                time.sleep(0.02)
+            # the subscriber side may learn of our writer slightly later than we learnt of it
+            time.sleep(min(0.5, args.delay))
 
         def publish_clock(t_ns: int) -> None:
             if clock_pub is not None:
@@ -132,6 +142,14 @@ def _play(reader, args: argparse.Namespace, rate: float) -> int:
             total += n
             if not args.loop or n == 0 or not context.ok():
                 break
+        # Reliable delivery needs the writers alive until the readers acknowledged (a lost
+        # packet is repaired from the writer's history); do not exit before that.
+        from rclpy.duration import Duration
+
+        unacked = [t for t, p in publishers.items()
+                   if p.get_subscription_count() and not p.wait_for_all_acked(Duration(seconds=2.0))]
+        if unacked:
+            log(f"lili-odom play: not acknowledged by every subscriber: {', '.join(unacked)}")
         log(f"lili-odom play: published {total} messages on {len(publishers)} topics "
             f"in {time.monotonic() - wall0:.2f} s ({passes} pass{'es' if passes > 1 else ''})")
         return 0

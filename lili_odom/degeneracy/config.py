@@ -50,3 +50,15 @@ def characteristic_length(scan: np.ndarray) -> float:
     r = np.linalg.norm(np.asarray(scan, dtype=float).reshape(-1, 3), axis=1)
     r = r[np.isfinite(r)]
     return float(np.median(r)) if len(r) else float("nan")
+
+
+def finite_points(scan: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 copy of ``scan`` without non-finite rows."""
+    scan = np.asarray(scan, dtype=np.float64).reshape(-1, 3)
+    return scan[np.all(np.isfinite(scan), axis=1)]
+
+
+def usable_length(scan: np.ndarray) -> float:
+    """``characteristic_length`` or 1 m when it is undefined (empty or all-zero scan)."""
+    L = characteristic_length(scan)
+    return L if np.isfinite(L) and L > 1e-9 else 1.0

@@ -94,9 +94,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lili_odom.degeneracy.config import RegistrationConfig, characteristic_length
+from lili_odom.degeneracy.config import RegistrationConfig, finite_points, usable_length
 from lili_odom.degeneracy.reference import AlignmentResult, GuardedRegistration, ReferenceMap
-from lili_odom.degeneracy.result import DegeneracyResult
+from lili_odom.degeneracy.result import DegeneracyResult, failed_result
 from lili_odom.degeneracy.subspace import orthonormal_rows
 from lili_odom.geometry import adjoint, orthonormalize, scaling_matrix, transform_points
 
@@ -410,16 +410,6 @@ class HessianConfig:
     registration: RegistrationConfig = field(default_factory=_default_registration)
 
 
-def _clean_scan(scan: np.ndarray) -> np.ndarray:
-    scan = np.asarray(scan, dtype=np.float64).reshape(-1, 3)
-    return scan[np.all(np.isfinite(scan), axis=1)]
-
-
-def _length(scan: np.ndarray) -> float:
-    L = characteristic_length(scan)
-    return L if np.isfinite(L) and L > 1e-9 else 1.0
-
-
 def _guess(initial_pose: np.ndarray) -> np.ndarray | None:
     """Re-orthonormalised initial pose, or None when it is not a finite 4x4 rigid transform."""
     try:
@@ -428,21 +418,22 @@ def _guess(initial_pose: np.ndarray) -> np.ndarray | None:
         return None
 
 
-def _failed(name: str, pose: np.ndarray, L: float, t0: float, reason: str, **details) -> DegeneracyResult:
-    return DegeneracyResult(
-        method=name,
-        pose=np.asarray(pose, dtype=float),
-        basis_scaled=np.zeros((0, 6)),
-        characteristic_length=L,
-        runtime_s=time.perf_counter() - t0,
-        ok=False,
-        reason=reason,
-        details=dict(details),
-    )
-
-
 class _Base:
     name = ""
+
+    def _start(self, reference: ReferenceMap, scan: np.ndarray, initial_pose: np.ndarray,
+               min_map_points: int, t0: float) -> DegeneracyResult | tuple[np.ndarray, float, np.ndarray]:
+        """Common input checks: (finite scan, L, re-orthonormalised guess) or a failed result."""
+        scan = finite_points(scan)
+        L = usable_length(scan)
+        guess = _guess(initial_pose)
+        if guess is None:
+            return failed_result(self.name, np.eye(4), L, t0, "invalid initial pose")
+        if len(scan) < self.config.min_correspondences:
+            return failed_result(self.name, guess, L, t0, f"only {len(scan)} finite scan points")
+        if reference.voxel_map.empty() or len(reference.points) < min_map_points:
+            return failed_result(self.name, guess, L, t0, "reference map is empty or too small")
+        return scan, L, guess
 
     def __init__(self, config, registration: GuardedRegistration | None):
         self.config = config
@@ -540,21 +531,16 @@ class ZhangDetector(_Base):
         """
         t0 = time.perf_counter()
         cfg = self.config
-        scan = _clean_scan(scan)
-        L = _length(scan)
-        guess = _guess(initial_pose)
-        if guess is None:
-            return _failed(self.name, np.eye(4), L, t0, "invalid initial pose")
-        if len(scan) < cfg.min_correspondences:
-            return _failed(self.name, guess, L, t0, f"only {len(scan)} finite scan points")
-        if reference.voxel_map.empty() or len(reference.points) < cfg.num_neighbors:
-            return _failed(self.name, guess, L, t0, "reference map is empty or too small")
+        start = self._start(reference, scan, initial_pose, cfg.num_neighbors, t0)
+        if isinstance(start, DegeneracyResult):
+            return start
+        scan, L, guess = start
 
         # First iteration: correspondences and Hessian at the initial guess.
         sel, normals, s = self.correspondences(reference, scan, guess)
         n = int(len(sel))
         if n < cfg.min_correspondences:
-            return _failed(
+            return failed_result(
                 self.name, guess, L, t0, f"only {n} plane correspondences at the initial guess",
                 n_correspondences=n,
             )
@@ -567,7 +553,7 @@ class ZhangDetector(_Base):
         # Pose: the shared f_opt (KISS-ICP), so all detectors report comparable poses.
         aligned, dist = self._optimum(reference, scan, guess, optimized_pose)
         if not aligned.ok:
-            return _failed(self.name, aligned.pose, L, t0, aligned.reason, n_correspondences=n)
+            return failed_result(self.name, aligned.pose, L, t0, aligned.reason, n_correspondences=n)
         pose = aligned.pose
 
         twists = lio_sam_directions_to_body_twists(V[degenerate], guess, pose)
@@ -649,23 +635,18 @@ class HessianDetector(_Base):
         """
         t0 = time.perf_counter()
         cfg = self.config
-        scan = _clean_scan(scan)
-        L = _length(scan)
-        guess = _guess(initial_pose)
-        if guess is None:
-            return _failed(self.name, np.eye(4), L, t0, "invalid initial pose")
-        if len(scan) < cfg.min_correspondences:
-            return _failed(self.name, guess, L, t0, f"only {len(scan)} finite scan points")
-        if reference.voxel_map.empty() or len(reference.points) < 3:
-            return _failed(self.name, guess, L, t0, "reference map is empty or too small")
+        start = self._start(reference, scan, initial_pose, 3, t0)
+        if isinstance(start, DegeneracyResult):
+            return start
+        scan, L, guess = start
         aligned, dist = self._optimum(reference, scan, guess, optimized_pose)
         if not aligned.ok:
-            return _failed(self.name, aligned.pose, L, t0, aligned.reason)
+            return failed_result(self.name, aligned.pose, L, t0, aligned.reason)
         pose = aligned.pose
         sel, normals = self.correspondences(reference, scan, pose, dist)
         n = int(len(sel))
         if n < cfg.min_correspondences:
-            return _failed(
+            return failed_result(
                 self.name, pose, L, t0, f"only {n} correspondences at the optimum",
                 n_correspondences=n,
             )

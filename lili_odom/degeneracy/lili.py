@@ -38,9 +38,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lili_odom import geometry
-from lili_odom.degeneracy.config import RegistrationConfig, characteristic_length
+from lili_odom.degeneracy.config import RegistrationConfig, finite_points, usable_length
 from lili_odom.degeneracy.reference import GuardedRegistration, ReferenceMap
-from lili_odom.degeneracy.result import DegeneracyResult
+from lili_odom.degeneracy.result import DegeneracyResult, failed_result
 from lili_odom.degeneracy.sparsify import sparsify
 
 
@@ -144,17 +144,13 @@ class LiliDetector:
         """
         t0 = time.perf_counter()
         cfg = self.config
-        scan = np.asarray(scan, dtype=np.float64).reshape(-1, 3)
-        scan = scan[np.all(np.isfinite(scan), axis=1)]
-        L = characteristic_length(scan)
+        scan = finite_points(scan)
+        L = usable_length(scan)
 
         def failed(pose: np.ndarray, reason: str) -> DegeneracyResult:
-            return DegeneracyResult(
-                self.name, pose, np.zeros((0, 6)), L if np.isfinite(L) else 1.0,
-                time.perf_counter() - t0, ok=False, reason=reason,
-            )
+            return failed_result(self.name, pose, L, t0, reason)
 
-        if len(scan) < cfg.min_points or not (np.isfinite(L) and L > 0):
+        if len(scan) < cfg.min_points:
             return failed(np.asarray(initial_pose, dtype=float), f"only {len(scan)} usable scan points")
         s = reference.spacing
         if not (np.isfinite(s) and s > 0):

@@ -8,6 +8,7 @@ twists live in the scan's *body* frame at ``pose``: the degenerate motions are
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -90,3 +91,18 @@ class DegeneracyResult:
             "ok": self.ok,
             "reason": self.reason,
         }
+
+
+def failed_result(method: str, pose: np.ndarray, length: float, started: float, reason: str,
+                  **details: Any) -> DegeneracyResult:
+    """An ``ok=False`` result with an empty basis; ``started`` is the ``perf_counter`` start."""
+    return DegeneracyResult(
+        method=method,
+        pose=np.asarray(pose, dtype=float),
+        basis_scaled=np.zeros((0, 6)),
+        characteristic_length=length,
+        runtime_s=time.perf_counter() - started,
+        ok=False,
+        reason=reason,
+        details=dict(details),
+    )

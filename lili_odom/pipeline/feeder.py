@@ -50,7 +50,6 @@ class MessageFeeder:
         self._lidar_frame: str | None = None
         self._imu_frame: str | None = None
         self._extrinsics_from_tf = False
-        self._scans_seen = 0
 
     def feed(self, topic: str, msg: Any) -> OdometryOutput | None:
         c = self.config
@@ -87,14 +86,12 @@ class MessageFeeder:
         log.info("extrinsics from /tf_static: %s -> %s", base, lidar_frame)
 
     def _scan(self, msg: Any) -> OdometryOutput | None:
-        self._scans_seen += 1
         try:
             scan = messages.scan_from_msg(msg, self._parse)
         except ValueError as exc:
             self.pipeline.counters["bad_clouds"] += 1
             log.warning("cloud skipped: %s", exc)
             return None
-        if self._scans_seen == 1 or not self._extrinsics_from_tf:
-            if not self.pipeline.estimator.initialized:
-                self._maybe_set_extrinsics(scan.frame_id)
+        if not self._extrinsics_from_tf and not self.pipeline.estimator.initialized:
+            self._maybe_set_extrinsics(scan.frame_id)
         return self.pipeline.process_scan(scan)

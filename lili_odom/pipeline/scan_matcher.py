@@ -23,15 +23,7 @@ from kiss_icp.threshold import AdaptiveThreshold
 from kiss_icp.voxelization import voxel_down_sample
 
 from lili_odom.degeneracy.reference import AlignmentResult, GuardedRegistration, ReferenceMap
-from lili_odom.geometry import is_valid_pose, log, orthonormalize
-
-
-def geometry_log_safe(T: np.ndarray) -> np.ndarray:
-    """SE(3) log, or NaNs when it cannot be taken (never raises)."""
-    try:
-        return log(T)
-    except Exception:  # noqa: BLE001
-        return np.full(6, np.nan)
+from lili_odom.geometry import is_valid_pose, orthonormalize
 
 
 @dataclass
@@ -130,8 +122,6 @@ class ScanMatcher:
             # that aborts the process inside Sophus. An empty time array skips deskewing.
             times = np.zeros(0)
         motion = orthonormalize(sweep_motion) if is_valid_pose(sweep_motion, 1e-3) else np.eye(4)
-        if not np.all(np.isfinite(geometry_log_safe(motion))):
-            motion = np.eye(4)
         frame = self._preprocessor.preprocess(points, times, motion)
         v = self.config.voxel
         map_points = voxel_down_sample(frame, 0.5 * v)
