@@ -67,25 +67,30 @@ def run(args: argparse.Namespace) -> int:
                             base_frame=config.base_frame) as writer:
         progress = _progress(reader.message_count, args.no_progress)
         scans = 0
-        for item in reader:
-            progress.advance()
-            if item.topic == config.ground_truth_topic:
-                truth.append(odometry_pose_from_msg(item.msg))
-                continue
-            out = feeder.feed(item.topic, item.msg)
-            if item.topic == config.lidar_topic:
-                scans += 1
-            if out is None:
-                if args.max_scans and scans >= args.max_scans:
-                    break
-                continue
+
+        def record(out) -> None:
             estimates.append((out.stamp, out.pose))
             dims.append(out.degeneracy.dimension if out.degeneracy is not None else 0)
             for k, v in out.timings.items():
                 timings.setdefault(k, []).append(v)
             writer.write_output(out)
-            if args.max_scans and scans >= args.max_scans:
+
+        for item in reader:
+            progress.advance()
+            if item.topic == config.ground_truth_topic:
+                truth.append(odometry_pose_from_msg(item.msg))
+                continue
+            done = bool(args.max_scans) and scans >= args.max_scans
+            if item.topic == config.lidar_topic:
+                if done:  # keep feeding IMU/wheels until the last scan has its data
+                    continue
+                scans += 1
+            for out in feeder.feed(item.topic, item.msg):
+                record(out)
+            if done and not feeder.pending:
                 break
+        for out in feeder.flush():
+            record(out)
         progress.close()
         if estimates:
             writer.write_map(pipeline.local_map_points(), estimates[-1][0])

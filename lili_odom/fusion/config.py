@@ -69,6 +69,8 @@ class FusionConfig:
         prior_sigma_rotation: initial pose prior [rad].
         prior_sigma_velocity: initial velocity prior [m/s] when the robot was seen at rest.
         prior_sigma_velocity_moving: initial velocity prior [m/s] otherwise.
+        prior_sigma_velocity_wheel: initial velocity prior [m/s] when the robot started while
+            moving and the wheel odometry gave its velocity.
         gravity_align: align roll/pitch of the initial pose with gravity from the IMU samples
             preceding the first stamp (only when no initial pose is given).
         gravity_window_s: length of that IMU window [s].
@@ -106,6 +108,7 @@ class FusionConfig:
     prior_sigma_rotation: float = 1e-3
     prior_sigma_velocity: float = 0.05
     prior_sigma_velocity_moving: float = 1.0
+    prior_sigma_velocity_wheel: float = 0.1
     gravity_align: bool = True
     gravity_window_s: float = 1.0
     estimate_gyro_bias_at_rest: bool = True

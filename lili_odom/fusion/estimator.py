@@ -252,8 +252,9 @@ class FusionEstimator:
         Args:
             pose: 4x4 initial pose of base_link in the odometry frame. None: identity, with
                 roll/pitch aligned to gravity from the preceding IMU samples when enabled.
-            velocity: (3,) initial velocity in the odometry frame [m/s]. None: zero (tight
-                prior if the IMU showed the robot at rest, loose otherwise).
+            velocity: (3,) initial velocity in the odometry frame [m/s]. None: from the wheel
+                odometry just before ``t`` when the robot is moving, else zero (tight prior if
+                the IMU showed the robot at rest, loose otherwise).
 
         Raises:
             ValueError: non-finite ``t``, invalid ``pose`` or ``velocity``.
@@ -266,9 +267,13 @@ class FusionEstimator:
         stationary = False
         gyro_bias = np.zeros(3)
         samples = self.imu.samples(t - cfg.gravity_window_s, t) if cfg.use_imu else []
+        # a steady IMU also fits constant-speed driving: the wheels, when there, decide
+        wheel_v = self._wheel_velocity(t) if velocity is None else None
+        if wheel_v is not None and np.linalg.norm(wheel_v) < 0.01:
+            wheel_v = None  # at rest: the IMU's stationary test and tight prior apply
         if samples:
             align = gravity_alignment(samples, self.T_base_imu[:3, :3])
-            stationary = align.stationary
+            stationary = align.stationary and wheel_v is None
             if stationary and cfg.estimate_gyro_bias_at_rest:
                 gyro_bias = align.gyro_bias
         if pose is None:
@@ -280,7 +285,11 @@ class FusionEstimator:
             T0 = _as_pose(pose)
             if T0 is None:
                 raise ValueError("initial pose must be a finite rigid 4x4 transform")
-        if velocity is None:
+        if wheel_v is not None:  # started while moving: the wheels know the speed
+            v0 = T0[:3, :3] @ wheel_v
+            sigma_v = cfg.prior_sigma_velocity_wheel
+            notes.append("initial velocity from wheel odometry")
+        elif velocity is None:
             v0 = np.zeros(3)
             sigma_v = cfg.prior_sigma_velocity if stationary else cfg.prior_sigma_velocity_moving
         else:
@@ -312,6 +321,15 @@ class FusionEstimator:
         out = self._commit(t, 0, notes, 0, False, False, False)
         assert out is not None
         return out
+
+    def _wheel_velocity(self, t: float) -> np.ndarray | None:
+        """Mean body velocity of base_link [m/s] from the wheel poses just before t."""
+        for window in (0.2, 0.1, 0.05):
+            delta = self.wheels.delta(t - window, t)
+            if delta is not None:
+                v = delta[:3, 3] / window
+                return v if _finite(v) and np.linalg.norm(v) < self.config.max_speed else None
+        return None
 
     # ---------------------------------------------------------------------------------------
     # update

@@ -1,12 +1,24 @@
 """Feed decoded ROS messages (rosbags or rclpy objects) into an ``OdometryPipeline``.
 
-One place decides what each input topic means, so the offline runner and the node behave the
-same: IMU and wheel messages are buffered, ``/tf_static`` sets the extrinsics before the first
-scan, clouds are parsed (bad ones are counted and skipped, never raised) and processed.
+One place decides what each input topic means and *when* a scan is processed, so the offline
+runner and the node behave the same: IMU and wheel messages are buffered, ``/tf_static`` sets
+the extrinsics before the first scan, clouds are parsed (bad ones are counted and skipped,
+never raised) and queued until the IMU and wheel data covering the sweep have arrived.
+
+Why scans wait: ouster-ros stamps a cloud at the *start* of its sweep, and the pipeline needs
+IMU (and wheel) samples up to the sweep's *end* to predict the pose, deskew and form the IMU
+factor. Read in header-stamp order (a bag) the cloud comes ~0.1 s before those samples; live,
+topics can arrive slightly out of order. A pending scan is processed as soon as every
+auxiliary stream has a sample at or after the sweep end, or the stream is considered absent
+(its newest sample is more than ``sensor_wait_s`` older than the sweep end, or it never
+sent anything), or any input has moved ``sensor_wait_s`` past the sweep end (a stalled
+stream), or ``max_pending_scans`` are waiting. ``flush()`` processes whatever still waits
+(end of a bag, or the node's wall-clock timeout).
 """
 from __future__ import annotations
 
 import logging
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -14,7 +26,7 @@ import numpy as np
 from lili_odom import messages
 from lili_odom.config import NodeConfig
 from lili_odom.pipeline.odometry import OdometryPipeline
-from lili_odom.pipeline.types import OdometryOutput
+from lili_odom.pipeline.types import OdometryOutput, Scan
 
 log = logging.getLogger(__name__)
 
@@ -38,8 +50,20 @@ def chain_transform(edges: dict[tuple[str, str], np.ndarray], parent: str, child
     return None
 
 
+def sweep_end(scan: Scan, default_sweep_s: float) -> float:
+    """Stamp [s] of the last point of ``scan`` (stamp + sweep length without per-point times)."""
+    t = scan.times
+    if t is not None and len(t) and np.all(np.isfinite(t)):
+        return scan.stamp + float(np.max(t))
+    return scan.stamp + default_sweep_s
+
+
 class MessageFeeder:
-    """Dispatch messages by topic to the pipeline (see module docstring)."""
+    """Dispatch messages by topic to the pipeline (see module docstring).
+
+    ``feed`` and ``flush`` return the outputs of every scan processed by that call, oldest
+    first (a scan can be released by a later IMU or wheel message).
+    """
 
     def __init__(self, pipeline: OdometryPipeline, config: NodeConfig):
         self.pipeline = pipeline
@@ -50,25 +74,80 @@ class MessageFeeder:
         self._lidar_frame: str | None = None
         self._imu_frame: str | None = None
         self._extrinsics_from_tf = False
+        self._pending: deque[tuple[float, Scan]] = deque()
+        self._newest_input = -np.inf
 
-    def feed(self, topic: str, msg: Any) -> OdometryOutput | None:
+    @property
+    def pending(self) -> int:
+        """Scans parsed and waiting for their IMU/wheel data."""
+        return len(self._pending)
+
+    def feed(self, topic: str, msg: Any) -> list[OdometryOutput]:
         c = self.config
         p = self.pipeline
         try:
             if topic == c.imu_topic:
                 self._imu_frame = self._imu_frame or str(msg.header.frame_id)
-                p.add_imu(messages.imu_from_msg(msg))
+                sample = messages.imu_from_msg(msg)
+                p.add_imu(sample)
+                self._saw(sample.stamp)
             elif topic == c.wheel_topic:
-                p.add_wheel(messages.wheel_from_msg(msg))
+                sample = messages.wheel_from_msg(msg)
+                p.add_wheel(sample)
+                self._saw(sample.stamp)
             elif topic in ("/tf_static",):
                 for parent, child, T in messages.transforms_from_tf_msg(msg):
                     self._tf_edges[(parent, child)] = T
             elif topic == c.lidar_topic:
-                return self._scan(msg)
+                self._queue_scan(msg)
         except (ValueError, AttributeError, TypeError) as exc:
             p.counters[f"bad_message{topic.replace('/', '_')}"] += 1
             log.warning("bad message on %s skipped: %s", topic, exc)
-        return None
+        return self._release(force=False)
+
+    def flush(self) -> list[OdometryOutput]:
+        """Process every waiting scan now, with whatever IMU/wheel data there is."""
+        return self._release(force=True)
+
+    def _saw(self, stamp: float) -> None:
+        if np.isfinite(stamp):
+            self._newest_input = max(self._newest_input, float(stamp))
+
+    def _queue_scan(self, msg: Any) -> None:
+        try:
+            scan = messages.scan_from_msg(msg, self._parse)
+        except ValueError as exc:
+            self.pipeline.counters["bad_clouds"] += 1
+            log.warning("cloud skipped: %s", exc)
+            return
+        end = sweep_end(scan, self.config.pipeline.sweep_duration)
+        if not np.isfinite(end):
+            end = scan.stamp
+        self._pending.append((end, scan))
+        self._saw(scan.stamp)
+
+    def _ready(self, end: float) -> bool:
+        wait = self.config.pipeline.sensor_wait_s
+        if self._newest_input >= end + wait:
+            return True
+        est = self.pipeline.estimator
+        streams = [est.wheels.newest_time]
+        if est.config.use_imu:
+            streams.append(est.imu.newest_time)
+        return all(t is None or t >= end or t < end - wait for t in streams)
+
+    def _release(self, force: bool) -> list[OdometryOutput]:
+        outputs: list[OdometryOutput] = []
+        limit = self.config.pipeline.max_pending_scans
+        while self._pending:
+            end, scan = self._pending[0]
+            if not (force or len(self._pending) > limit or self._ready(end)):
+                break
+            self._pending.popleft()
+            out = self._process(scan)
+            if out is not None:
+                outputs.append(out)
+        return outputs
 
     def _maybe_set_extrinsics(self, lidar_frame: str) -> None:
         if self._extrinsics_from_tf or not self.config.extrinsics.use_tf_static or not self._tf_edges:
@@ -85,13 +164,7 @@ class MessageFeeder:
         self._extrinsics_from_tf = True
         log.info("extrinsics from /tf_static: %s -> %s", base, lidar_frame)
 
-    def _scan(self, msg: Any) -> OdometryOutput | None:
-        try:
-            scan = messages.scan_from_msg(msg, self._parse)
-        except ValueError as exc:
-            self.pipeline.counters["bad_clouds"] += 1
-            log.warning("cloud skipped: %s", exc)
-            return None
+    def _process(self, scan: Scan) -> OdometryOutput | None:
         if not self._extrinsics_from_tf and not self.pipeline.estimator.initialized:
             self._maybe_set_extrinsics(scan.frame_id)
         return self.pipeline.process_scan(scan)

@@ -53,6 +53,11 @@ class PipelineConfig:
         max_forward_gap_s: a gap longer than this between scans re-initialises the estimator
             at the last fused pose instead of integrating the IMU over it.
         detection_points: scan points handed to the detector (evenly thinned), 0 = all.
+        sensor_wait_s: how long [s of stamp time] a scan waits for IMU/wheel samples at or
+            after its sweep end before it is processed without them (see
+            :mod:`lili_odom.pipeline.feeder`).
+        max_pending_scans: scans allowed to wait for IMU/wheel data at once; beyond, the
+            oldest is processed with what there is.
         scan_matcher / fusion / lili / zhang / hessian: the stages' own configurations.
     """
 
@@ -62,6 +67,8 @@ class PipelineConfig:
     max_backward_jump_s: float = 0.05
     max_forward_gap_s: float = 1.0
     detection_points: int = 4000
+    sensor_wait_s: float = 0.3
+    max_pending_scans: int = 3
     scan_matcher: ScanMatcherConfig = field(default_factory=ScanMatcherConfig)
     fusion: FusionConfig = field(default_factory=FusionConfig)
     lili: LiliConfig = field(default_factory=LiliConfig)
@@ -79,6 +86,10 @@ class PipelineConfig:
             raise ValueError(f"max_forward_gap_s must be > 0, got {self.max_forward_gap_s}")
         if self.detection_points < 0:
             raise ValueError(f"detection_points must be >= 0, got {self.detection_points}")
+        if not 0 <= self.sensor_wait_s <= 10:
+            raise ValueError(f"sensor_wait_s must be in [0, 10] s, got {self.sensor_wait_s}")
+        if not 1 <= self.max_pending_scans <= 100:
+            raise ValueError(f"max_pending_scans must be in [1, 100], got {self.max_pending_scans}")
         self.scan_matcher.validate()
         self.lili.validate()
 
@@ -124,10 +135,15 @@ class OdometryPipeline:
         return self.estimator.T_base_lidar
 
     def set_extrinsics(self, T_base_lidar: np.ndarray, T_base_imu: np.ndarray) -> None:
-        """Replace the extrinsics (e.g. from ``/tf_static``); resets the estimator state."""
+        """Replace the extrinsics (e.g. from ``/tf_static``); resets map and state.
+
+        The buffered IMU and wheel samples are kept: they are in the sensors' own frames.
+        """
         self.config.fusion.T_base_lidar = geometry.orthonormalize(T_base_lidar)
         self.config.fusion.T_base_imu = geometry.orthonormalize(T_base_imu)
+        imu, wheels = self.estimator.imu, self.estimator.wheels
         self.reset(count=False)
+        self.estimator.imu, self.estimator.wheels = imu, wheels
 
     def reset(self, count: bool = True) -> None:
         """Forget map, state and buffers (clock jump backwards, new bag loop)."""
