@@ -76,6 +76,16 @@ class MessageFeeder:
         self._extrinsics_from_tf = False
         self._pending: deque[tuple[float, Scan]] = deque()
         self._newest_input = -np.inf
+        self.processed = 0  # scans handed to the pipeline
+
+    def restart(self) -> None:
+        """Forget the input clock and waiting scans (after a pipeline reset on a clock jump)."""
+        self._pending.clear()
+        self._newest_input = -np.inf
+
+    def _count(self, name: str) -> None:
+        counters = self.pipeline.counters
+        counters[name] = counters.get(name, 0) + 1
 
     @property
     def pending(self) -> int:
@@ -101,7 +111,7 @@ class MessageFeeder:
             elif topic == c.lidar_topic:
                 self._queue_scan(msg)
         except (ValueError, AttributeError, TypeError) as exc:
-            p.counters[f"bad_message{topic.replace('/', '_')}"] += 1
+            self._count(f"bad_message{topic.replace('/', '_')}")
             log.warning("bad message on %s skipped: %s", topic, exc)
         return self._release(force=False)
 
@@ -117,12 +127,14 @@ class MessageFeeder:
         try:
             scan = messages.scan_from_msg(msg, self._parse)
         except ValueError as exc:
-            self.pipeline.counters["bad_clouds"] += 1
+            self._count("bad_clouds")
             log.warning("cloud skipped: %s", exc)
             return
         end = sweep_end(scan, self.config.pipeline.sweep_duration)
         if not np.isfinite(end):
             end = scan.stamp
+        if scan.stamp < self._newest_input - 1.0:  # clock jumped back (bag loop): new clock
+            self._newest_input = -np.inf
         self._pending.append((end, scan))
         self._saw(scan.stamp)
 
@@ -130,7 +142,9 @@ class MessageFeeder:
         wait = self.config.pipeline.sensor_wait_s
         if self._newest_input >= end + wait:
             return True
-        est = self.pipeline.estimator
+        est = getattr(self.pipeline, "estimator", None)
+        if est is None:  # a pipeline without sensor buffers: nothing to wait for
+            return True
         streams = [est.wheels.newest_time]
         if est.config.use_imu:
             streams.append(est.imu.newest_time)
@@ -165,6 +179,8 @@ class MessageFeeder:
         log.info("extrinsics from /tf_static: %s -> %s", base, lidar_frame)
 
     def _process(self, scan: Scan) -> OdometryOutput | None:
-        if not self._extrinsics_from_tf and not self.pipeline.estimator.initialized:
+        est = getattr(self.pipeline, "estimator", None)
+        if not self._extrinsics_from_tf and est is not None and not est.initialized:
             self._maybe_set_extrinsics(scan.frame_id)
+        self.processed += 1
         return self.pipeline.process_scan(scan)

@@ -6,10 +6,9 @@ Run: ``lili_odom_node --ros-args --params-file config/lili_odom.yaml [-p use_sim
 Inputs (sensor-data QoS, best effort; topics are parameters):
 ``lidar_topic`` (``/ouster/points``, PointCloud2), ``imu_topic`` (``/ouster/imu``, Imu),
 ``wheel_topic`` (``/platform/odom``, Odometry), and ``/tf_static`` when
-``extrinsics.use_tf_static`` is true and ``tf2_msgs`` is importable: once ``base_frame`` ->
-lidar frame and ``base_frame`` -> IMU frame are both known (frames from the messages' headers),
-they replace the configured extrinsics through ``pipeline.set_extrinsics`` (applied by the
-worker between scans). Without tf2_msgs (the pip ROS stack) the extrinsics parameters rule.
+``extrinsics.use_tf_static`` is true and ``tf2_msgs`` is importable: when it links
+``base_frame`` to the cloud's frame before the first scan, it replaces the configured
+extrinsics. Without tf2_msgs (the pip ROS stack) the extrinsics parameters rule.
 
 Outputs (node name ``lili_odom``): ``~/odometry`` (Odometry, ``odom_frame`` -> ``base_frame``,
 every processed scan), ``~/path`` (Path, every ``path_period`` s of stamp time, at most
@@ -20,10 +19,13 @@ see :func:`lili_odom.messages.degeneracy_markers`), ``~/degeneracy/basis`` (JSON
 :func:`lili_odom.messages.degeneracy_basis_dict`) and ``/tf`` (``odom_frame`` ->
 ``base_frame``) when ``publish_tf`` is true and ``tf2_msgs`` is importable.
 
-Threading: callbacks run on a single-threaded executor and only convert and buffer (IMU/wheel)
-or hand over (scans), so they are never starved by processing. One worker thread owns the
-pipeline: it drains the IMU/wheel buffers, parses the newest scan, runs the pipeline and
-publishes.
+Threading: callbacks run on a single-threaded executor and only buffer (IMU, wheel,
+``/tf_static``) or hand over (scans), so they are never starved by processing. One worker
+thread owns the pipeline and feeds it through the same
+:class:`lili_odom.pipeline.feeder.MessageFeeder` as the offline runner, so a scan is
+processed with exactly the IMU/wheel data the runner would use: it waits until the samples
+covering its sweep end have arrived (at most ``pipeline.sensor_wait_s`` of stamp time, or the
+same in wall time when the other inputs fall silent).
 
 Scan-drop policy: at most ONE scan waits while another is processed. A scan arriving while one
 is already waiting replaces it; the older waiting scan is dropped, counted (``scans_dropped``)
@@ -33,6 +35,8 @@ and the node always works on the newest data.
 Time: all stamps come from the messages' headers; ``use_sim_time`` (standard parameter) only
 affects the node clock. When a scan stamp goes back by more than 1 s (a bag restarted), the
 pipeline and the path are reset.
+
+Not driven by the node: ``ground_truth_topic`` (offline evaluation only).
 
 Parameters: the provider's (``lili_odom.config.NodeConfig``'s dotted names, as in
 ``config/lili_odom.yaml``) plus :data:`NODE_PARAMETERS`; all are declared with dynamic typing
@@ -57,11 +61,11 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityP
 from rcl_interfaces.msg import ParameterDescriptor
 
 from lili_odom import messages as M
+from lili_odom.pipeline.feeder import MessageFeeder
 from lili_odom.pipeline.types import OdometryOutput
 from lili_odom.ros.factory import MessageTypeError, RclpyFactory, message_class
 from lili_odom.ros.provider import OdometryPipelineProvider, PipelineLike, PipelineProvider
 from lili_odom.ros.queues import LatestSlot, SampleBuffer
-from lili_odom.ros.static_tf import lookup
 
 __all__ = ["LiliOdomNode", "NODE_PARAMETERS", "main", "parameters_from_mapping"]
 
@@ -118,36 +122,31 @@ class LiliOdomNode(Node):
 
     Args:
         provider: source of parameter defaults and the pipeline (default: the real pipeline).
-        cloud_parser: PointCloud2 parser (default :func:`lili_odom.messages.default_cloud_parser`).
         **kwargs: passed to ``rclpy.node.Node`` (e.g. ``context``, ``parameter_overrides``).
     """
 
-    def __init__(self, provider: PipelineProvider | None = None,
-                 cloud_parser: M.CloudParser | None = None, **kwargs: Any) -> None:
+    def __init__(self, provider: PipelineProvider | None = None, **kwargs: Any) -> None:
         super().__init__("lili_odom", **kwargs)
         self._provider = provider or OdometryPipelineProvider()
-        self._parse = cloud_parser or M.default_cloud_parser()
         self._factory = RclpyFactory()
         self.p = self._declare_parameters()
         self.pipeline: PipelineLike = self._provider.create(dict(self.p))
+        self.config = OdometryPipelineProvider().node_config(self.p)
+        self._feeder = MessageFeeder(self.pipeline, self.config)
 
         self.counters: dict[str, int] = {
             "scans_received": 0, "scans_processed": 0, "scans_dropped": 0,
             "scans_no_output": 0, "scan_errors": 0, "imu_received": 0, "wheel_received": 0,
-            "imu_errors": 0, "wheel_errors": 0, "resets": 0,
+            "resets": 0,
         }
         self._processing_time = 0.0
         self._scans = LatestSlot()
-        self._imu = SampleBuffer(maxlen=20000)
-        self._wheel = SampleBuffer(maxlen=10000)
+        self._inputs = SampleBuffer(maxlen=30000)  # (topic, msg): IMU, wheel, /tf_static
+        self._pending_since: float | None = None
         self._path: list[tuple[float, np.ndarray]] = []
         self._last_stamp = -float("inf")
         self._last_path_stamp = -float("inf")
         self._last_map_stamp = -float("inf")
-        self.static_transforms: dict[tuple[str, str], np.ndarray] = {}
-        self._frames = {"lidar": "os_lidar", "imu": "os_imu"}
-        self._pending_extrinsics: tuple[np.ndarray, np.ndarray] | None = None
-        self._applied_extrinsics: tuple[np.ndarray, np.ndarray] | None = None
 
         odom_frame = self.p["odom_frame"]
         self.get_logger().info(f"odometry frame {odom_frame!r} -> {self.p['base_frame']!r}")
@@ -229,70 +228,71 @@ class LiliOdomNode(Node):
                 throttle_duration_sec=5.0)
 
     def _on_imu(self, msg: Any) -> None:
-        self._frames["imu"] = str(msg.header.frame_id) or self._frames["imu"]
-        try:
-            self._imu.append(M.imu_from_msg(msg))
-            self.counters["imu_received"] += 1
-        except (AttributeError, TypeError, ValueError):
-            self.counters["imu_errors"] += 1
+        self.counters["imu_received"] += 1
+        self._inputs.append((self.p["imu_topic"], msg))
 
     def _on_wheel(self, msg: Any) -> None:
-        try:
-            self._wheel.append(M.wheel_from_msg(msg))
-            self.counters["wheel_received"] += 1
-        except (AttributeError, TypeError, ValueError):
-            self.counters["wheel_errors"] += 1
+        self.counters["wheel_received"] += 1
+        self._inputs.append((self.p["wheel_topic"], msg))
 
     def _on_tf_static(self, msg: Any) -> None:
         for parent, child, T in M.transforms_from_tf_msg(msg):
-            if (parent, child) not in self.static_transforms:
-                self.get_logger().info(f"/tf_static {parent} -> {child}: t = "
-                                       f"{np.round(T[:3, 3], 4).tolist()} m")
-            self.static_transforms[(parent, child)] = T
-        base = self.p["base_frame"]
-        T_lidar = lookup(self.static_transforms, base, self._frames["lidar"])
-        T_imu = lookup(self.static_transforms, base, self._frames["imu"])
-        if T_lidar is not None and T_imu is not None:
-            self._pending_extrinsics = (T_lidar, T_imu)
+            self.get_logger().info(f"/tf_static {parent} -> {child}: t = "
+                                   f"{np.round(T[:3, 3], 4).tolist()} m")
+        self._inputs.append(("/tf_static", msg))
 
     # -- worker --------------------------------------------------------------------------
 
     def _work(self) -> None:
+        wait_wall = float(self.config.pipeline.sensor_wait_s)
         while not self._stop.is_set():
-            msg = self._scans.take(timeout=0.2)
-            if msg is None:
-                continue
+            msg = self._scans.take(timeout=0.01 if self._feeder.pending else 0.2)
             t0 = time.perf_counter()
             try:
-                self._process(msg)
+                self._step(msg, wait_wall)
             except Exception as exc:  # noqa: BLE001 - one bad scan must not stop the node
                 self.counters["scan_errors"] += 1
                 self.get_logger().error(f"scan processing failed: {type(exc).__name__}: {exc}",
                                         throttle_duration_sec=5.0)
             self._processing_time += time.perf_counter() - t0
 
-    def _process(self, msg: Any) -> None:
-        scan = M.scan_from_msg(msg, self._parse)
-        self._frames["lidar"] = scan.frame_id or self._frames["lidar"]
-        self._apply_extrinsics()
-        if scan.stamp < self._last_stamp - 1.0:
-            self.get_logger().warn(f"scan stamp jumped back by {self._last_stamp - scan.stamp:.2f}"
-                                   " s: resetting the pipeline")
-            self.pipeline.reset()
-            self._path.clear()
-            self._last_path_stamp = self._last_map_stamp = -float("inf")
-            self.counters["resets"] += 1
-        self._last_stamp = scan.stamp
-        for sample in self._imu.drain():
-            self.pipeline.add_imu(sample)
-        for sample in self._wheel.drain():
-            self.pipeline.add_wheel(sample)
-        out = self.pipeline.process_scan(scan)
-        self.counters["scans_processed"] += 1
-        if out is None:
-            self.counters["scans_no_output"] += 1
-            return
-        self._publish(out)
+    def _step(self, msg: Any, wait_wall: float) -> None:
+        """Feed the buffered inputs, then the scan (if any); publish what comes out."""
+        feeder = self._feeder
+        before = feeder.processed
+        outputs = []
+        for topic, item in self._inputs.drain():
+            outputs += feeder.feed(topic, item)
+        if msg is not None:
+            stamp = M.stamp_seconds(msg.header)
+            if stamp < self._last_stamp - 1.0:
+                self.get_logger().warn(f"scan stamp jumped back by {self._last_stamp - stamp:.2f}"
+                                       " s: resetting the pipeline")
+                self._publish_all(outputs + feeder.flush())
+                outputs = []
+                self.pipeline.reset()
+                feeder.restart()
+                self._path.clear()
+                self._last_path_stamp = self._last_map_stamp = -float("inf")
+                self.counters["resets"] += 1
+            self._last_stamp = stamp
+            outputs += feeder.feed(self.p["lidar_topic"], msg)
+        now = time.monotonic()
+        if not feeder.pending:
+            self._pending_since = None
+        elif self._pending_since is None or feeder.processed != before:
+            self._pending_since = now
+        elif now - self._pending_since > wait_wall:  # the other inputs fell silent
+            outputs += feeder.flush()
+            self._pending_since = None
+        processed = feeder.processed - before
+        self.counters["scans_processed"] += processed
+        self.counters["scans_no_output"] += processed - len(outputs)
+        self._publish_all(outputs)
+
+    def _publish_all(self, outputs: list[OdometryOutput]) -> None:
+        for out in outputs:
+            self._publish(out)
 
     def _publish(self, out: OdometryOutput) -> None:
         f, p = self._factory, self.p
@@ -319,25 +319,14 @@ class LiliOdomNode(Node):
             self.pub_map.publish(M.pointcloud_xyz_msg(f, points, out.stamp, frame))
             self._last_map_stamp = out.stamp
 
-    def _apply_extrinsics(self) -> None:
-        pending, self._pending_extrinsics = self._pending_extrinsics, None
-        if pending is None or not hasattr(self.pipeline, "set_extrinsics"):
-            return
-        if self._applied_extrinsics is not None and all(
-                np.allclose(a, b, atol=1e-9) for a, b in zip(pending, self._applied_extrinsics)):
-            return
-        self.pipeline.set_extrinsics(*pending)
-        self._applied_extrinsics = pending
-        self.get_logger().info("extrinsics taken from /tf_static")
-
     # -- diagnostics and shutdown --------------------------------------------------------
 
     def diagnostics(self) -> dict[str, Any]:
         """Node counters plus the pipeline's counters (prefixed ``pipeline.``)."""
         out: dict[str, Any] = dict(self.counters)
         out["scans_dropped"] = self._scans.dropped
-        out["imu_overflow"] = self._imu.overflow
-        out["wheel_overflow"] = self._wheel.overflow
+        out["input_overflow"] = self._inputs.overflow
+        out["scans_waiting"] = self._feeder.pending
         n = max(1, out["scans_processed"])
         out["mean_processing_s"] = round(self._processing_time / n, 4)
         for k, v in dict(getattr(self.pipeline, "counters", {}) or {}).items():
