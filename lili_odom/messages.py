@@ -28,13 +28,17 @@ Frames and units (REP-103/105):
 from __future__ import annotations
 
 import json
+import logging
 import math
-from typing import Any, Callable, Iterable, Protocol, Sequence
+from typing import Any, Callable, Iterable, MutableMapping, Protocol, Sequence
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from lili_odom.errors import ThrottledWarnings
 from lili_odom.pipeline.types import ImuSample, OdometryOutput, Scan, WheelSample
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "MessageFactory",
@@ -104,7 +108,8 @@ def _xyz(v: Any) -> np.ndarray:
 def pose_to_matrix(pose: Any) -> np.ndarray:
     """``geometry_msgs/Pose`` (or ``Transform``: translation/rotation) -> 4x4.
 
-    A zero quaternion (never set) is read as identity.
+    A zero quaternion (never set) is read as identity. A non-finite quaternion gives a NaN
+    rotation, so every consumer rejects the pose instead of taking a made-up orientation.
     """
     position = getattr(pose, "position", None)
     if position is None:
@@ -114,9 +119,12 @@ def pose_to_matrix(pose: Any) -> np.ndarray:
         q = pose.rotation
     quat = np.array([q.x, q.y, q.z, q.w], dtype=np.float64)
     T = np.eye(4)
-    norm = float(np.linalg.norm(quat))
-    if norm > 1e-12 and np.all(np.isfinite(quat)):
-        T[:3, :3] = Rotation.from_quat(quat / norm).as_matrix()
+    if not np.all(np.isfinite(quat)):
+        T[:3, :3] = np.nan
+    else:
+        norm = float(np.linalg.norm(quat))
+        if norm > 1e-12 and math.isfinite(norm):
+            T[:3, :3] = Rotation.from_quat(quat / norm).as_matrix()
     T[:3, 3] = _xyz(position)
     return T
 
@@ -170,14 +178,36 @@ def odometry_pose_from_msg(msg: Any) -> tuple[float, np.ndarray]:
     return stamp_seconds(msg.header), pose_to_matrix(msg.pose.pose)
 
 
-def default_cloud_parser(min_range: float = 0.0, max_range: float = math.inf) -> CloudParser:
-    """A :data:`CloudParser` backed by :func:`lili_odom.pointcloud2.parse_cloud`."""
+_WARNINGS = ThrottledWarnings(log)
+
+
+def default_cloud_parser(min_range: float = 0.0, max_range: float = math.inf,
+                         counters: "MutableMapping[str, int] | None" = None) -> CloudParser:
+    """A :data:`CloudParser` backed by :func:`lili_odom.pointcloud2.parse_cloud`.
+
+    A cloud is used as far as it is valid: a corrupt per-point time field is ignored (no
+    deskewing) and isolated corrupt times drop their points. Each case is counted in
+    ``counters`` (when given: ``cloud_times_ignored``, ``cloud_bad_time_points``) and logged
+    as a throttled warning saying why. Malformed layouts raise ``CloudFormatError``.
+    """
 
     def parse(msg: Any, stamp: float) -> tuple[np.ndarray, np.ndarray | None, int]:
         from lili_odom.pointcloud2 import parse_cloud  # lazy: keeps this module light
 
         parsed = parse_cloud(msg, min_range=min_range, max_range=max_range, stamp=stamp)
-        return parsed.xyz, parsed.times, parsed.stats.n_total - parsed.stats.n_kept
+        s = parsed.stats
+        if s.times_ignored:
+            if counters is not None:
+                counters["cloud_times_ignored"] = counters.get("cloud_times_ignored", 0) + 1
+            _WARNINGS.warning("times_ignored", "cloud at %.3f: per-point times ignored "
+                              "(no deskewing): %s", stamp, s.times_ignored)
+        if s.n_bad_time:
+            if counters is not None:
+                counters["cloud_bad_time_points"] = (counters.get("cloud_bad_time_points", 0)
+                                                     + s.n_bad_time)
+            _WARNINGS.warning("bad_time", "cloud at %.3f: %d points with corrupt "
+                              "per-point times dropped", stamp, s.n_bad_time)
+        return parsed.xyz, parsed.times, s.n_total - s.n_kept
 
     return parse
 
@@ -205,11 +235,20 @@ def scan_from_msg(msg: Any, parse_fn: CloudParser | None = None) -> Scan:
 
 
 def transforms_from_tf_msg(msg: Any) -> list[tuple[str, str, np.ndarray]]:
-    """``tf2_msgs/TFMessage`` -> ``[(parent, child, T_parent_child 4x4)]``."""
+    """``tf2_msgs/TFMessage`` -> ``[(parent, child, T_parent_child 4x4)]``.
+
+    Transforms with a non-finite translation or rotation are left out (warned, throttled):
+    an extrinsic must never poison the estimator.
+    """
     out = []
     for ts in msg.transforms:
-        out.append((str(ts.header.frame_id), str(ts.child_frame_id),
-                    pose_to_matrix(ts.transform)))
+        parent, child = str(ts.header.frame_id), str(ts.child_frame_id)
+        T = pose_to_matrix(ts.transform)
+        if not np.all(np.isfinite(T)):
+            _WARNINGS.warning(f"tf {parent} {child}", "transform %s -> %s ignored: "
+                              "non-finite translation or rotation", parent, child)
+            continue
+        out.append((parent, child, T))
     return out
 
 

@@ -56,6 +56,15 @@ _TIME_FIELDS = ("t", "time", "timestamp")
 _MAX_POINT_STEP = 1 << 16
 _MAX_POINTS = 1 << 26
 
+# Per-point time sanity. A sweep's times fill one contiguous span (0.1 s for a 10 Hz Ouster);
+# a time farther than this fraction of the central span (1st..99th percentile) beyond it, plus
+# _TIME_OUTLIER_FLOOR_S, is a corrupt value and its point is dropped. A central span longer
+# than MAX_SWEEP_S means the whole time field is garbage: it is then ignored.
+_TIME_OUTLIER_MARGIN = 0.1
+_TIME_OUTLIER_FLOOR_S = 1e-3
+_TIME_OUTLIER_MIN_POINTS = 20
+MAX_SWEEP_S = 1.0
+
 
 class CloudFormatError(ValueError):
     """The PointCloud2 content is malformed or lacks what the parser needs."""
@@ -97,7 +106,11 @@ class ParseStats:
     n_zero_range: int = 0  # xyz == 0 or a range field == 0 (older ouster drivers)
     n_too_close: int = 0  # norm(xyz) < min_range
     n_too_far: int = 0  # norm(xyz) > max_range
+    n_bad_time: int = 0  # per-point time far outside the sweep's own time span (corrupt)
     n_kept: int = 0
+    #: why the cloud's time field was not used ("" when it was, or when there is none): the
+    #: points are then kept without per-point times (no deskewing).
+    times_ignored: str = ""
 
 
 @dataclass
@@ -318,6 +331,7 @@ def parse_cloud(
     min_range: float = 0.0,
     max_range: float = math.inf,
     stamp: float | None = None,
+    max_sweep_s: float = MAX_SWEEP_S,
 ) -> ParsedCloud:
     """Parse PointCloud2 content into valid points and per-point times.
 
@@ -327,9 +341,15 @@ def parse_cloud(
         max_range: drop points farther than this [m].
         stamp: the message's ``header.stamp`` in seconds; only needed for clouds whose time
             field holds absolute times (otherwise times are already relative to the stamp).
+        max_sweep_s: longest plausible sweep [s]. Per-point times are checked against the
+            sweep's own span: isolated values far outside it are corrupt (their points are
+            dropped, ``stats.n_bad_time``); a time field with no finite value or a span
+            longer than this is ignored (``times`` None, ``stats.times_ignored`` says why)
+            and the points are kept.
 
     Returns:
-        The kept points (NaN/Inf, zero-range and out-of-range points removed) with counters.
+        The kept points (NaN/Inf, zero-range, out-of-range and corrupt-time points removed)
+        with counters.
 
     Raises:
         CloudFormatError: missing x/y/z, inconsistent point_step/row_step/data length, a field
@@ -370,8 +390,16 @@ def parse_cloud(
     rng = optional("range")
     ring = optional("ring")
 
+    xyz_finite = np.all(np.isfinite(xyz), axis=1)
+    bad_time = np.zeros(n_total, dtype=bool)
+    times_ignored = ""
+    if times is not None:
+        times, bad_time, times_ignored = _check_times(times, xyz_finite, max_sweep_s)
+        if times is None:
+            scale, offset = 1.0, 0.0
+
     with np.errstate(invalid="ignore", over="ignore"):
-        finite = np.all(np.isfinite(xyz), axis=1)
+        finite = xyz_finite.copy()
         if times is not None:
             finite &= np.isfinite(times)
         norm = np.full(n_total, np.nan)
@@ -385,12 +413,16 @@ def parse_cloud(
         # a norm that overflowed to inf counts as too far
         too_far |= rest & ~np.isfinite(norm)
     keep = rest & ~too_close & ~too_far
+    bad_time &= keep  # counted once, under the first reason that applies
+    keep &= ~bad_time
 
     stats.n_nonfinite = int(np.count_nonzero(~finite))
     stats.n_zero_range = int(np.count_nonzero(zero))
     stats.n_too_close = int(np.count_nonzero(too_close))
     stats.n_too_far = int(np.count_nonzero(too_far & ~too_close))
+    stats.n_bad_time = int(np.count_nonzero(bad_time))
     stats.n_kept = int(np.count_nonzero(keep))
+    stats.times_ignored = times_ignored
 
     def sel(a: np.ndarray | None, dtype: Any) -> np.ndarray | None:
         return None if a is None else np.asarray(a[keep], dtype=dtype)
@@ -402,11 +434,43 @@ def parse_cloud(
         range=sel(rng, np.float64),
         ring=sel(ring, np.int64),
         index=np.flatnonzero(keep).astype(np.int64),
-        time_field=t_spec.name if t_spec is not None else "",
+        time_field=t_spec.name if t_spec is not None and times is not None else "",
         time_scale=scale,
         time_offset=offset,
         stats=stats,
     )
+
+
+def _check_times(times: np.ndarray, xyz_finite: np.ndarray, max_sweep_s: float
+                 ) -> tuple[np.ndarray | None, np.ndarray, str]:
+    """Sanity of per-point times (seconds from the stamp) of the points with finite xyz.
+
+    Returns ``(times or None, bad_time mask, reason)``: None with a reason when the whole field
+    is unusable (no finite value, or a central span longer than ``max_sweep_s``); otherwise
+    the mask of isolated corrupt values far outside the sweep's span (those points are
+    dropped). Points with finite xyz but a non-finite time are left to the caller (dropped as
+    non-finite) unless no time at all is finite.
+    """
+    bad = np.zeros(times.shape[0], dtype=bool)
+    valid = times[xyz_finite]
+    finite_t = valid[np.isfinite(valid)]
+    if valid.size == 0:
+        return times, bad, ""
+    if finite_t.size == 0:
+        return None, bad, "no finite per-point time"
+    if finite_t.size >= _TIME_OUTLIER_MIN_POINTS:
+        lo, hi = np.quantile(finite_t, [0.01, 0.99])
+    else:
+        lo, hi = float(np.median(finite_t)), float(np.median(finite_t))
+    if not hi - lo <= max_sweep_s:
+        return None, bad, (f"per-point times span {hi - lo:.3g} s, more than a sweep "
+                           f"({max_sweep_s:g} s)")
+    margin = _TIME_OUTLIER_MARGIN * (hi - lo) + _TIME_OUTLIER_FLOOR_S
+    if finite_t.size < _TIME_OUTLIER_MIN_POINTS:
+        margin = max(margin, max_sweep_s)  # too few points for statistics: only the hard limit
+    with np.errstate(invalid="ignore"):
+        bad = np.isfinite(times) & ((times < lo - margin) | (times > hi + margin))
+    return times, bad, ""
 
 
 # --------------------------------------------------------------------------------------------
