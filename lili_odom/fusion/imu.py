@@ -123,22 +123,73 @@ class IntegrationReport:
     reason: str = ""
 
 
+class StampJumpFilter:
+    """Guards a time-ordered buffer against single corrupt stamps and real clock jumps.
+
+    A stamp more than ``max_forward_s`` after the newest buffered one, or more than
+    ``max_backward_s`` before it, does not fit the buffer's timeline. One such sample is
+    *held*: when the next sample fits the timeline again, the held ones were corrupt stamps
+    and are discarded (``n_outliers``); when ``confirm`` consecutive samples agree with each
+    other (increasing, each at most ``max_forward_s`` after the previous), the clock really
+    jumped (a sensor restart or a bag loop) and they are released (``n_jumps``).
+
+    Without this a single sample stamped far in the future would prune the whole buffer (its
+    horizon is measured from the newest stamp) and every later, correct, sample with it.
+    """
+
+    def __init__(self, max_forward_s: float = 1.0, max_backward_s: float = 30.0,
+                 confirm: int = 3) -> None:
+        self.max_forward_s = float(max_forward_s)
+        self.max_backward_s = float(max_backward_s)
+        self.confirm = max(1, int(confirm))
+        self.held: list[tuple[float, object]] = []
+        self.n_outliers = 0
+        self.n_jumps = 0
+
+    def offer(self, t: float, item: object, newest: float | None) -> tuple[str, list]:
+        """Classify a sample at ``t`` against the buffer's ``newest`` stamp.
+
+        Returns ``("fits", [])``, ``("held", [])``, or ``("forward" | "backward", items)``
+        with the held ``(t, item)`` pairs to insert (after clearing the buffer for
+        ``"backward"``).
+        """
+        if newest is None or newest - self.max_backward_s <= t <= newest + self.max_forward_s:
+            if self.held:
+                self.n_outliers += len(self.held)
+                self.held = []
+            return "fits", []
+        if self.held and not 0.0 < t - self.held[-1][0] <= self.max_forward_s:
+            self.n_outliers += len(self.held)
+            self.held = []
+        self.held.append((t, item))
+        if len(self.held) < self.confirm:
+            return "held", []
+        released, self.held = self.held, []
+        self.n_jumps += 1
+        return ("forward" if t > newest else "backward"), released
+
+
 class ImuBuffer:
     """Time-ordered IMU samples with robust insertion.
 
     ``add`` keeps the buffer sorted even when samples arrive out of order, drops exact
     duplicates (same stamp within 1 us), non-finite samples and samples beyond the sensor's
-    range (``max_abs_acc`` [m/s^2], ``max_abs_gyro`` [rad/s]), and prunes samples older than
-    ``buffer_seconds`` before the newest. Counters say what happened.
+    range (``max_abs_acc`` [m/s^2], ``max_abs_gyro`` [rad/s]), holds back samples whose stamp
+    jumps away from the buffer's timeline until the jump is confirmed
+    (:class:`StampJumpFilter`), and prunes samples older than ``buffer_seconds`` before the
+    newest. Counters say what happened.
     """
 
     def __init__(self, buffer_seconds: float = 30.0, max_samples: int = 20000,
-                 max_abs_acc: float = 160.0, max_abs_gyro: float = 35.0) -> None:
+                 max_abs_acc: float = 160.0, max_abs_gyro: float = 35.0,
+                 max_stamp_jump_s: float = 1.0) -> None:
         self.buffer_seconds = float(buffer_seconds)
         self.max_samples = int(max_samples)
         self.max_abs_acc = float(max_abs_acc)
         self.max_abs_gyro = float(max_abs_gyro)
+        self.jumps = StampJumpFilter(max_stamp_jump_s, self.buffer_seconds)
         self.n_out_of_range = 0
+        self.n_held = 0
         self._t: list[float] = []
         self._s: list[ImuSample] = []
         self.n_added = 0
@@ -172,6 +223,20 @@ class ImuBuffer:
         if np.abs(acc).max() > self.max_abs_acc or np.abs(gyro).max() > self.max_abs_gyro:
             self.n_out_of_range += 1
             return False
+        verdict, released = self.jumps.offer(t, (acc, gyro), self.newest_time)
+        if verdict == "held":
+            self.n_held += 1
+            return False
+        if verdict == "backward":
+            self._t.clear()
+            self._s.clear()
+        if released:
+            for tr, (ar, gr) in released:
+                self._insert(tr, ar, gr)
+            return True
+        return self._insert(t, acc, gyro)
+
+    def _insert(self, t: float, acc: np.ndarray, gyro: np.ndarray) -> bool:
         i = bisect.bisect_left(self._t, t)
         if (i < len(self._t) and abs(self._t[i] - t) < 1e-6) or (
             i > 0 and abs(self._t[i - 1] - t) < 1e-6

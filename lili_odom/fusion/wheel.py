@@ -81,18 +81,26 @@ def wheel_information(delta: np.ndarray, cfg: WheelNoiseConfig) -> np.ndarray:
 class WheelBuffer:
     """Time-ordered wheel odometry poses with SE(3) interpolation.
 
-    ``add`` rejects non-finite or invalid poses and duplicates (counters), and keeps the buffer
-    sorted when messages arrive out of order.
+    ``add`` rejects non-finite or invalid poses and duplicates (counters), keeps the buffer
+    sorted when messages arrive out of order, and holds back poses whose stamp jumps away
+    from the buffer's timeline until the jump is confirmed (a single corrupt stamp far in the
+    future would otherwise prune every other pose; see
+    :class:`lili_odom.fusion.imu.StampJumpFilter`).
     """
 
-    def __init__(self, cfg: WheelNoiseConfig | None = None) -> None:
+    def __init__(self, cfg: WheelNoiseConfig | None = None, max_stamp_jump_s: float = 1.0
+                 ) -> None:
+        from lili_odom.fusion.imu import StampJumpFilter
+
         self.cfg = cfg or WheelNoiseConfig()
         self._t: list[float] = []
         self._T: list[np.ndarray] = []
+        self.jumps = StampJumpFilter(max_stamp_jump_s, self.cfg.buffer_seconds)
         self.n_added = 0
         self.n_invalid = 0
         self.n_duplicates = 0
         self.n_out_of_order = 0
+        self.n_held = 0
 
     def __len__(self) -> int:
         return len(self._t)
@@ -113,6 +121,20 @@ class WheelBuffer:
             self.n_invalid += 1
             return False
         T = orthonormalize(T)
+        verdict, released = self.jumps.offer(t, T, self.newest_time)
+        if verdict == "held":
+            self.n_held += 1
+            return False
+        if verdict == "backward":
+            self._t.clear()
+            self._T.clear()
+        if released:
+            for tr, Tr in released:
+                self._insert(tr, Tr)
+            return True
+        return self._insert(t, T)
+
+    def _insert(self, t: float, T: np.ndarray) -> bool:
         i = bisect.bisect_left(self._t, t)
         if (i < len(self._t) and abs(self._t[i] - t) < 1e-6) or (
             i > 0 and abs(self._t[i - 1] - t) < 1e-6
