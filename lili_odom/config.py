@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from lili_odom.errors import check_range
 from lili_odom.pipeline.odometry import PipelineConfig
 
 NODE_NAME = "lili_odom"
@@ -93,17 +94,85 @@ class NodeConfig:
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
 
     def validate(self) -> None:
-        if not self.map_publish_period_s > 0:
-            raise ValueError("map_publish_period_s must be > 0 s")
-        if self.path_max_poses < 1:
-            raise ValueError("path_max_poses must be >= 1")
+        """Raise ``ValueError("<dotted.name> must be <range>, got <value>")`` for the first
+        parameter out of its range (every nested configuration included)."""
+        check_range("map_publish_period_s", self.map_publish_period_s, 0.0, 3600.0,
+                    lo_open=True, unit="s")
+        check_range("path_max_poses", self.path_max_poses, 1, 10**7)
         self.extrinsics.validate()
+        _check_ranges(self)
+        self.pipeline.fusion.validate("pipeline.fusion.")
         self.pipeline.validate()
 
     def apply_extrinsics(self) -> None:
         """Copy the configured extrinsics into the fusion configuration."""
         self.pipeline.fusion.T_base_lidar = self.extrinsics.T_base_lidar()
         self.pipeline.fusion.T_base_imu = self.extrinsics.T_base_imu()
+
+
+# ---------------------------------------------------------------------------------------------
+# parameter ranges of the configurations whose own validate() does not check them all
+# (dotted name -> (low, high, low excluded, high excluded, unit); None = unbounded)
+
+_INF = None
+PARAMETER_RANGES: dict[str, tuple] = {
+    "pipeline.sweep_duration": (0.0, 1.0, True, False, "s"),
+    "pipeline.min_points": (10, 10**7, False, False, ""),
+    "pipeline.max_backward_jump_s": (0.0, 3600.0, False, False, "s"),
+    "pipeline.max_forward_gap_s": (0.0, 3600.0, True, False, "s"),
+    "pipeline.detection_points": (0, 10**7, False, False, ""),
+    "pipeline.sensor_wait_s": (0.0, 10.0, False, False, "s"),
+    "pipeline.max_pending_scans": (1, 100, False, False, ""),
+    "pipeline.scan_matcher.max_range": (0.0, 1000.0, True, False, "m"),
+    "pipeline.scan_matcher.min_range": (0.0, 1000.0, False, True, "m"),
+    "pipeline.scan_matcher.voxel_size": (0.0, 100.0, False, False, "m"),
+    "pipeline.scan_matcher.max_points_per_voxel": (1, 10000, False, False, ""),
+    "pipeline.scan_matcher.initial_threshold": (0.0, 100.0, True, False, "m"),
+    "pipeline.scan_matcher.min_motion_th": (0.0, 10.0, False, False, "m"),
+    "pipeline.scan_matcher.max_iterations": (1, 10000, False, False, ""),
+    "pipeline.scan_matcher.convergence": (0.0, 1.0, True, False, ""),
+    "pipeline.scan_matcher.max_threads": (0, 1024, False, False, ""),
+    "pipeline.lili.k": (2, 100, False, False, ""),
+    "pipeline.lili.tau_displacement": (0.0, 1.0, True, True, ""),
+    "pipeline.lili.tau_pca": (0.0, _INF, True, False, ""),
+    "pipeline.lili.ratio_points": (1, 10**7, False, False, ""),
+    "pipeline.lili.min_points": (10, 10**7, False, False, ""),
+    "pipeline.zhang.eigenvalue_threshold": (0.0, _INF, True, False, ""),
+    "pipeline.zhang.num_neighbors": (3, 100, False, False, ""),
+    "pipeline.zhang.max_neighbor_distance": (0.0, 100.0, True, False, "m"),
+    "pipeline.zhang.max_plane_deviation": (0.0, 100.0, True, False, "m"),
+    "pipeline.zhang.min_weight": (0.0, 1.0, False, False, ""),
+    "pipeline.zhang.min_correspondences": (6, 10**7, False, False, ""),
+    "pipeline.hessian.threshold": (0.0, _INF, True, False, ""),
+    "pipeline.hessian.normal_k": (3, 100, False, False, ""),
+    "pipeline.hessian.min_planarity": (0.0, 1.0, False, False, ""),
+    "pipeline.hessian.min_correspondences": (6, 10**7, False, False, ""),
+}
+for _det in ("lili", "zhang", "hessian"):
+    PARAMETER_RANGES.update({
+        f"pipeline.{_det}.registration.max_iterations": (1, 10000, False, False, ""),
+        f"pipeline.{_det}.registration.convergence": (0.0, 1.0, True, False, ""),
+        f"pipeline.{_det}.registration.max_correspondence_distance": (0.0, 100.0, False, False,
+                                                                      "m"),
+        f"pipeline.{_det}.registration.kernel": (0.0, 100.0, False, False, ""),
+        f"pipeline.{_det}.registration.max_threads": (0, 1024, False, False, ""),
+    })
+
+
+def _check_ranges(config: "NodeConfig") -> None:
+    from lili_odom.pipeline.odometry import METHODS
+
+    if config.pipeline.method not in METHODS:
+        raise ValueError(f"pipeline.method must be one of {', '.join(METHODS)}, "
+                         f"got {config.pipeline.method!r}")
+    values = flatten(config)
+    for name, (lo, hi, lo_open, hi_open, unit) in PARAMETER_RANGES.items():
+        if name in values:
+            check_range(name, values[name], lo, hi, lo_open=lo_open, hi_open=hi_open, unit=unit)
+    sm = config.pipeline.scan_matcher
+    if not sm.min_range < sm.max_range:
+        raise ValueError(f"pipeline.scan_matcher.min_range must be < pipeline.scan_matcher."
+                         f"max_range ({sm.max_range:g} m), got {sm.min_range!r}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -192,9 +261,24 @@ def load_config(path: str | Path | None = None, node_name: str = NODE_NAME) -> N
         return config
     import yaml
 
-    data = yaml.safe_load(Path(path).read_text()) or {}
+    try:
+        data = yaml.safe_load(Path(path).read_text()) or {}
+    except yaml.YAMLError as exc:
+        where = getattr(exc, "problem_mark", None)
+        line = f" (line {where.line + 1})" if where is not None else ""
+        problem = getattr(exc, "problem", None) or type(exc).__name__
+        raise ValueError(f"{path}: not a valid YAML file{line}: {problem}") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not a text file") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a ROS 2 parameter file ('{node_name}: "
+                         f"ros__parameters: ...'), got a {type(data).__name__}")
     section = data.get(node_name, data.get(f"/{node_name}", data.get("/**", {})))
+    if section is not None and not isinstance(section, dict):
+        raise ValueError(f"{path}: '{node_name}' must be a mapping")
     params = (section or {}).get("ros__parameters", {})
+    if params is None:
+        params = {}
     if not isinstance(params, dict):
         raise ValueError(f"{path}: '{node_name}.ros__parameters' must be a mapping")
     return apply_params(config, _flatten_mapping(params))

@@ -39,3 +39,30 @@ class ThrottledWarnings:
             message = f"{message} ({held} similar in the last {self.period_s:g} s not shown)"
         self.logger.warning(message, *args)
         return True
+
+
+def check_range(name: str, value, lo: float | None = None, hi: float | None = None, *,
+                lo_open: bool = False, hi_open: bool = False, unit: str = "") -> None:
+    """Raise ``ValueError("<name> must be <range>, got <value>")`` unless ``value`` is in range.
+
+    ``lo``/``hi`` None mean unbounded; ``lo_open``/``hi_open`` exclude the bound. NaN and
+    non-numbers are always out of range.
+    """
+    try:
+        v = float(value)
+        ok = v == v and (lo is None or (v > lo if lo_open else v >= lo)) and (
+            hi is None or (v < hi if hi_open else v <= hi))
+    except (TypeError, ValueError):
+        ok = False
+    if ok:
+        return
+    u = f" {unit}" if unit else ""
+    if lo is not None and hi is not None:
+        text = f"in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}{u}"
+    elif lo is not None:
+        text = f"{'>' if lo_open else '>='} {lo:g}{u}"
+    elif hi is not None:
+        text = f"{'<' if hi_open else '<='} {hi:g}{u}"
+    else:
+        text = "a number"
+    raise ValueError(f"{name} must be {text}, got {value!r}")

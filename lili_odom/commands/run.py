@@ -51,7 +51,11 @@ def run(args: argparse.Namespace) -> int:
     out_dir: Path = args.out
     if (out_dir / "odometry").exists():
         raise UserError(f"{out_dir}: already holds a run (odometry/ exists); choose another --out")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"{out_dir}: cannot create the output directory: "
+                        f"{exc.strerror or exc}") from None
 
     pipeline = OdometryPipeline(config.pipeline)
     feeder = MessageFeeder(pipeline, config)
@@ -78,7 +82,12 @@ def run(args: argparse.Namespace) -> int:
         for item in reader:
             progress.advance()
             if item.topic == config.ground_truth_topic:
-                truth.append(odometry_pose_from_msg(item.msg))
+                try:
+                    stamp, T_truth = odometry_pose_from_msg(item.msg)
+                except (AttributeError, TypeError, ValueError):
+                    continue
+                if np.isfinite(stamp) and np.all(np.isfinite(T_truth)):
+                    truth.append((stamp, T_truth))
                 continue
             done = bool(args.max_scans) and scans >= args.max_scans
             if item.topic == config.lidar_topic:

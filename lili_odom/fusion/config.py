@@ -5,10 +5,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lili_odom.errors import check_range
 from lili_odom.fusion.imu import ImuNoiseConfig
 from lili_odom.fusion.wheel import WheelNoiseConfig
 
 __all__ = ["LidarNoiseConfig", "FusionConfig", "ImuNoiseConfig", "WheelNoiseConfig"]
+
+RESTRICTIONS = ("marginalize", "project")
 
 
 @dataclass
@@ -31,6 +34,19 @@ class LidarNoiseConfig:
     degenerate_epsilon: float = 1e-6
     restriction: str = "marginalize"
     default_length: float = 10.0
+
+    def validate(self, prefix: str = "lidar.") -> None:
+        """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
+        check_range(prefix + "sigma_translation", self.sigma_translation, 0.0, 100.0,
+                    lo_open=True, unit="m")
+        check_range(prefix + "sigma_rotation", self.sigma_rotation, 0.0, 10.0, lo_open=True,
+                    unit="rad")
+        check_range(prefix + "degenerate_epsilon", self.degenerate_epsilon, 0.0, 1.0,
+                    hi_open=True)
+        if self.restriction not in RESTRICTIONS:
+            raise ValueError(f"{prefix}restriction must be one of {', '.join(RESTRICTIONS)}, "
+                             f"got {self.restriction!r}")
+        check_range(prefix + "default_length", self.default_length, 1e-3, 1e6, unit="m")
 
     def information(self) -> np.ndarray:
         """6x6 diagonal information ``(v, w)`` in the LiDAR body frame."""
@@ -127,3 +143,33 @@ class FusionConfig:
     max_rate: float = 5.0
     gate_margin_translation: float = 1.0
     gate_margin_rotation: float = 0.5
+
+    def validate(self, prefix: str = "fusion.") -> None:
+        """Raise ``ValueError("<prefix><name> must be <range>, got <value>")`` for the first
+        out-of-range parameter (the nested imu/wheel/lidar configurations included)."""
+        self.imu.validate(prefix + "imu.")
+        self.wheel.validate(prefix + "wheel.")
+        self.lidar.validate(prefix + "lidar.")
+        for name in ("prior_sigma_translation", "prior_sigma_rotation", "prior_sigma_velocity",
+                     "prior_sigma_velocity_moving", "prior_sigma_velocity_wheel",
+                     "no_imu_sigma_translation_per_s", "no_imu_sigma_rotation_per_s",
+                     "no_imu_sigma_floor_translation", "no_imu_sigma_floor_rotation",
+                     "no_imu_sigma_velocity"):
+            if hasattr(self, name):
+                check_range(prefix + name, getattr(self, name), 0.0, 1e3, lo_open=True)
+        check_range(prefix + "gravity_window_s", self.gravity_window_s, 0.0, 60.0, lo_open=True,
+                    unit="s")
+        check_range(prefix + "wheel_weak_scale", self.wheel_weak_scale, 0.0, 1.0)
+        check_range(prefix + "max_interval_s", self.max_interval_s, 0.0, 3600.0, lo_open=True,
+                    unit="s")
+        check_range(prefix + "reset_every", self.reset_every, 1, 100000)
+        check_range(prefix + "relinearize_threshold", self.relinearize_threshold, 0.0, 10.0,
+                    lo_open=True)
+        check_range(prefix + "extra_iterations", self.extra_iterations, 0, 100)
+        check_range(prefix + "history_size", self.history_size, 2, 100000)
+        check_range(prefix + "max_speed", self.max_speed, 0.0, 1000.0, lo_open=True, unit="m/s")
+        check_range(prefix + "max_rate", self.max_rate, 0.0, 1000.0, lo_open=True, unit="rad/s")
+        check_range(prefix + "gate_margin_translation", self.gate_margin_translation, 0.0, 1e3,
+                    unit="m")
+        check_range(prefix + "gate_margin_rotation", self.gate_margin_rotation, 0.0, 10.0,
+                    unit="rad")

@@ -81,6 +81,23 @@ class ImuNoiseConfig:
     max_abs_acc: float = 160.0
     max_abs_gyro: float = 35.0
 
+    def validate(self, prefix: str = "imu.") -> None:
+        """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
+        from lili_odom.errors import check_range
+
+        for name in ("accel_noise_density", "gyro_noise_density", "accel_bias_random_walk",
+                     "gyro_bias_random_walk", "integration_sigma", "accel_bias_prior_sigma",
+                     "gyro_bias_prior_sigma"):
+            check_range(prefix + name, getattr(self, name), 0.0, 1e3, lo_open=True)
+        check_range(prefix + "gravity", self.gravity, 9.7, 9.9, unit="m/s^2")
+        check_range(prefix + "max_gap_s", self.max_gap_s, 0.0, 10.0, lo_open=True, unit="s")
+        check_range(prefix + "max_extrapolation_s", self.max_extrapolation_s, 0.0, 1.0, unit="s")
+        check_range(prefix + "buffer_seconds", self.buffer_seconds, 1.0, 3600.0, unit="s")
+        check_range(prefix + "max_abs_acc", self.max_abs_acc, self.gravity, None, lo_open=True,
+                    unit="m/s^2")
+        check_range(prefix + "max_abs_gyro", self.max_abs_gyro, 0.0, None, lo_open=True,
+                    unit="rad/s")
+
 
 def make_preintegration_params(
     cfg: ImuNoiseConfig, T_base_imu: np.ndarray | None = None

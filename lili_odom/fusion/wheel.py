@@ -61,6 +61,21 @@ class WheelNoiseConfig:
     max_extrapolation_s: float = 0.05
     buffer_seconds: float = 30.0
 
+    def validate(self, prefix: str = "wheel.") -> None:
+        """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
+        from lili_odom.errors import check_range
+
+        for name in ("forward_floor", "lateral_floor", "vertical_floor", "yaw_floor",
+                     "tilt_floor"):  # a zero sigma would be an infinite information
+            check_range(prefix + name, getattr(self, name), 0.0, 1e3, lo_open=True)
+        for name in ("forward_per_metre", "lateral_per_metre", "vertical_per_metre",
+                     "yaw_per_rad", "yaw_per_metre", "tilt_per_metre"):
+            check_range(prefix + name, getattr(self, name), 0.0, 1e3)
+        check_range(prefix + "max_interpolation_gap_s", self.max_interpolation_gap_s, 0.0,
+                    60.0, lo_open=True, unit="s")
+        check_range(prefix + "max_extrapolation_s", self.max_extrapolation_s, 0.0, 1.0, unit="s")
+        check_range(prefix + "buffer_seconds", self.buffer_seconds, 1.0, 3600.0, unit="s")
+
 
 def wheel_information(delta: np.ndarray, cfg: WheelNoiseConfig) -> np.ndarray:
     """6x6 information ``(v, w)`` of one wheel increment ``delta`` (4x4, base_link)."""
