@@ -11,6 +11,7 @@ from lili_odom.fusion.wheel import WheelNoiseConfig
 
 __all__ = ["LidarNoiseConfig", "FusionConfig", "ImuNoiseConfig", "WheelNoiseConfig"]
 
+ROBUST_KERNELS = ("none", "huber", "cauchy")
 RESTRICTIONS = ("marginalize", "project")
 
 
@@ -27,6 +28,11 @@ class LidarNoiseConfig:
         restriction: ``"marginalize"`` (treat the degenerate components of the measurement
             as unknown, Schur complement) or ``"project"`` (plain ``P Omega P``).
         default_length: characteristic length L [m] used when no detector result is given.
+        robust_kernel: M-estimator on the LiDAR factor: ``none``, ``huber`` or ``cauchy``. A
+            registration that slid along a direction the detector missed then disagrees with
+            the IMU/wheel prediction by many sigmas and is down-weighted instead of dragging
+            the velocity and bias along.
+        robust_threshold: kernel threshold on the whitened residual (sigmas).
     """
 
     sigma_translation: float = 0.02
@@ -34,6 +40,8 @@ class LidarNoiseConfig:
     degenerate_epsilon: float = 1e-6
     restriction: str = "marginalize"
     default_length: float = 10.0
+    robust_kernel: str = "cauchy"
+    robust_threshold: float = 1.0
 
     def validate(self, prefix: str = "lidar.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -47,6 +55,10 @@ class LidarNoiseConfig:
             raise ValueError(f"{prefix}restriction must be one of {', '.join(RESTRICTIONS)}, "
                              f"got {self.restriction!r}")
         check_range(prefix + "default_length", self.default_length, 1e-3, 1e6, unit="m")
+        if self.robust_kernel not in ROBUST_KERNELS:
+            raise ValueError(f"{prefix}robust_kernel must be one of {', '.join(ROBUST_KERNELS)}, "
+                             f"got {self.robust_kernel!r}")
+        check_range(prefix + "robust_threshold", self.robust_threshold, 0.0, 100.0, lo_open=True)
 
     def information(self) -> np.ndarray:
         """6x6 diagonal information ``(v, w)`` in the LiDAR body frame."""

@@ -97,6 +97,15 @@ def _noise_from_information(omega_vw: np.ndarray) -> gtsam.noiseModel.Base:
     return gtsam.noiseModel.Gaussian.SqrtInformation(np.asarray(R), False)
 
 
+def _robust_kernel(name: str, threshold: float) -> Any:
+    """GTSAM M-estimator ``name`` (``none`` | ``huber`` | ``cauchy``) at a whitened threshold."""
+    if name == "huber":
+        return gtsam.noiseModel.mEstimator.Huber.Create(threshold)
+    if name == "cauchy":
+        return gtsam.noiseModel.mEstimator.Cauchy.Create(threshold)
+    return None
+
+
 def _finite(*arrays: Any) -> bool:
     try:
         return all(np.all(np.isfinite(np.asarray(a, dtype=float))) for a in arrays)
@@ -516,8 +525,12 @@ class FusionEstimator:
             used_lidar = split.lidar is not None
             if used_lidar:
                 Z = np.linalg.inv(T_prev) @ T_meas
+                noise = _noise_from_information(split.lidar)
+                kernel = _robust_kernel(cfg.lidar.robust_kernel, cfg.lidar.robust_threshold)
+                if kernel is not None:
+                    noise = gtsam.noiseModel.Robust.Create(kernel, noise)
                 graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(orthonormalize(Z)),
-                                                   _noise_from_information(split.lidar)))
+                                                   noise))
             used_wheel = split.wheel is not None and delta_w is not None
             if used_wheel:
                 graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(delta_w),
