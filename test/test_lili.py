@@ -7,7 +7,8 @@ from conftest import plane_pair
 from lili_odom import geometry as g
 from lili_odom.degeneracy.factory import reference_for_detection
 from lili_odom.degeneracy.lili import LiliConfig, LiliDetector, pca_subspace, perturbation_twists
-from lili_odom.degeneracy.sparsify import sparsify
+from lili_odom.degeneracy.reference import ReferenceMap
+from lili_odom.degeneracy.sparsify import _cost_and_gradient, _rotation, sparsify
 
 
 def test_perturbation_sizing_moves_median_point_k_minus_1_spacings():
@@ -49,6 +50,56 @@ def test_sparsify_recovers_axis_basis_from_rotated_mix():
 def test_sparsify_keeps_coupled_direction_intact():
     u = np.array([[0.6, 0, 0, 0, 0.8, 0]])
     assert np.allclose(sparsify(u), u)
+
+
+@pytest.mark.parametrize("k", [2, 3, 4])
+def test_sparsify_rotation_and_gradient_are_exact(k):
+    from scipy.linalg import expm
+    from scipy.optimize import approx_fprime
+
+    n = k * (k - 1) // 2
+    for theta in (np.random.default_rng(k).uniform(-3, 3, n), np.full(n, 1e-5), np.zeros(n)):
+        A = np.zeros((k, k))
+        A[np.triu_indices(k, 1)] = theta
+        assert np.allclose(_rotation(theta, k), expm(A - A.T), atol=1e-12)
+    if k <= 3:
+        B = special_ortho_group.rvs(6, random_state=k)[:k]
+        fun = _cost_and_gradient(B)
+        theta = np.random.default_rng(1).uniform(-3, 3, n)
+        numeric = approx_fprime(theta, lambda t: fun(t)[0], 1e-7)
+        assert np.allclose(fun(theta)[1], numeric, atol=1e-5)
+
+
+@pytest.mark.parametrize("k", [2, 3, 4])
+def test_sparsify_keeps_the_subspace_and_does_not_raise_l1(k):
+    for seed in range(5):
+        B = special_ortho_group.rvs(6, random_state=seed)[:k]
+        out = sparsify(B)
+        assert np.allclose(out @ out.T, np.eye(k), atol=1e-9)
+        assert np.allclose(out.T @ out, B.T @ B, atol=1e-9)  # same row space
+        assert np.abs(out).sum() <= np.abs(B).sum() + 1e-9
+
+
+def test_sparsify_two_rows_reaches_the_global_minimum():
+    # the l1 norm of a rotated pair of rows is minimal at an angle where a component vanishes;
+    # compare with a dense scan of the angle
+    B = special_ortho_group.rvs(6, random_state=7)[:2]
+    t = np.linspace(0, np.pi / 2, 200001)
+    c, s = np.cos(t)[:, None], np.sin(t)[:, None]
+    dense = (np.abs(c * B[0] + s * B[1]).sum(1) + np.abs(c * B[1] - s * B[0]).sum(1)).min()
+    assert np.abs(sparsify(B)).sum() == pytest.approx(dense, abs=1e-6)
+
+
+def test_reference_spacing_from_probes_matches_all_points():
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(0)
+    pts = np.c_[rng.uniform(-20, 20, (30000, 2)), rng.normal(0, 0.01, 30000)]
+    rm = ReferenceMap.from_points(pts, 1.0, 200)
+    full = np.median(cKDTree(rm.points).query(rm.points, k=2)[0][:, 1])
+    assert rm.spacing == pytest.approx(full, rel=0.02)
+    rm.invalidate()
+    assert "spacing" not in rm.__dict__ and rm.spacing == pytest.approx(full, rel=0.02)
 
 
 @pytest.mark.parametrize("rotated", [False, True])

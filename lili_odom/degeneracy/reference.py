@@ -22,6 +22,8 @@ from scipy.spatial import cKDTree
 from lili_odom.geometry import is_valid_pose, orthonormalize, transform_points
 
 MIN_POINTS = 10
+SPACING_PROBES = 4000
+"""Map points whose nearest-neighbour distances estimate ``ReferenceMap.spacing``."""
 
 
 class ReferenceMap:
@@ -67,14 +69,23 @@ class ReferenceMap:
 
     @cached_property
     def kdtree(self) -> cKDTree:
-        return cKDTree(self.points)
+        # An unbalanced tree builds ~2x faster and queries about as fast on scan-like clouds;
+        # the odometry rebuilds it after every map update.
+        return cKDTree(self.points, balanced_tree=False, compact_nodes=False)
 
     @cached_property
     def spacing(self) -> float:
-        """Median distance [m] from a map point to its nearest other map point."""
-        if len(self.points) < 2:
+        """Median distance [m] from a map point to its nearest other map point.
+
+        Measured on at most ``SPACING_PROBES`` evenly strided map points (each against the whole
+        map, so every probe's distance is exact): the median of that many samples is within
+        about 1 % of the median over all points, at a fraction of the cost on a large map.
+        """
+        points = self.points
+        if len(points) < 2:
             return float("nan")
-        d, _ = self.kdtree.query(self.points, k=2, workers=-1)
+        probes = points[:: max(1, -(-len(points) // SPACING_PROBES))]
+        d, _ = self.kdtree.query(probes, k=2)
         return float(np.median(d[:, 1]))
 
     def normals(self, k: int = 10) -> tuple[np.ndarray, np.ndarray]:
