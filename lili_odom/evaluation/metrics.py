@@ -64,3 +64,16 @@ def evaluate(est_stamps: np.ndarray, est_poses: np.ndarray, ref_stamps: np.ndarr
         matched_poses=int(ref.num_poses),
         final_error_m=final,
     )
+
+
+def error_along_path(est_stamps: np.ndarray, est_poses: np.ndarray, ref_stamps: np.ndarray,
+                     ref_poses: np.ndarray, max_dt: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
+    """Position error [m] of the SE(3)-aligned estimate (as for the ATE) against the distance
+    travelled along the truth [m], one value per matched pose."""
+    from evo.core import sync
+
+    ref, est = sync.associate_trajectories(_traj(ref_stamps, ref_poses), _traj(est_stamps, est_poses),
+                                           max_diff=max_dt)
+    est.align(ref, correct_scale=False)
+    return (np.asarray(ref.distances, dtype=float),
+            np.linalg.norm(est.positions_xyz - ref.positions_xyz, axis=1))
