@@ -222,22 +222,10 @@ def test_inner_imu_gap_of_seconds_falls_back_then_recovers():
     assert any("no IMU" in w for o in _ok(gap) for w in o.warnings)
 
 
-CAUCHY_XFAIL = pytest.mark.xfail(strict=True, reason=(
-    "since 4b0b37e the LiDAR factor is under a Cauchy kernel at 1 sigma: whenever the IMU "
-    "prediction is wrong (0.1 s of samples clipped at the 16 g / 2000 deg/s range, or the loose "
-    "velocity prior of a state initialised without its IMU window after a reset) the correct "
-    "registration is down-weighted as the outlier and the robot runs away (21 m here; 0.6 m "
-    "with robust_kernel none; still 13.6 m with robust_threshold 5). Needed in "
-    "FusionEstimator.update: no kernel on the LiDAR factor when the interval's IMU samples "
-    "reach 0.95 * max_abs_acc / max_abs_gyro (saturated) or within the first few updates after "
-    "initialize()/_recover(); better, drop the IMU factor instead of the LiDAR one when they "
-    "disagree by many sigmas and the IMU interval is suspect"))
-
-
 @inner
 @pytest.mark.parametrize("fault", ["duplicates", "out_of_order", "backwards", "future_glitch",
                                    "past_glitch", "nan", "saturated",
-                                   pytest.param("clipped_at_range", marks=CAUCHY_XFAIL)])
+                                   "clipped_at_range"])
 def test_inner_imu_faults_keep_poses_finite_and_put(fault):
     from lili_odom.pipeline.types import ImuSample
 
@@ -342,12 +330,6 @@ def test_inner_without_wheels_degenerate_direction_has_a_large_covariance():
 
 
 @inner
-@pytest.mark.xfail(strict=True, reason=(
-    "FusionEstimator.update counts a degenerate update without wheel data only in "
-    "stats.n_no_wheel; it adds no note, so OdometryOutput.warnings does not say that the "
-    "degenerate directions rest on the IMU alone. Needed: when split.dimension > 0 and "
-    "delta_w is None, notes.append('no wheel data: degenerate directions constrained by the "
-    "IMU / motion model only') (and a throttled log in the pipeline)"))
 def test_inner_without_wheels_degenerate_scans_carry_a_warning():
     outs, degenerate = _corridor_run(False)
     assert degenerate
@@ -368,7 +350,6 @@ def test_inner_clock_jump_backwards_resets_cleanly(caplog):
 
 
 @inner
-@CAUCHY_XFAIL
 def test_inner_after_a_bag_loop_the_robot_stays_put():
     sim = Sim()
     sim.run(T0, 3.0)
@@ -379,14 +360,6 @@ def test_inner_after_a_bag_loop_the_robot_stays_put():
 
 
 @inner
-@pytest.mark.xfail(strict=True, reason=(
-    "OdometryPipeline.reset() replaces the estimator with empty IMU/wheel buffers, but the "
-    "IMU and wheel samples of the new timeline that arrived before the first scan after the "
-    "jump were added to the old buffers and are lost: the first state is not gravity aligned "
-    "(and the wheel samples of the old timeline were rejected as duplicates meanwhile). "
-    "Needed: in process_scan's backward-jump branch, re-add to the new estimator the samples "
-    "added since the previous scan (keep them in a list in add_imu/add_wheel, cleared after "
-    "each processed scan)"))
 def test_inner_after_a_bag_loop_the_pipeline_equals_a_fresh_one():
     R = Rotation.from_euler("xy", [0.1, -0.05]).as_matrix()  # robot parked on a slope
     imu = lambda t: Sim.still_imu(t, R)  # noqa: E731
@@ -425,13 +398,6 @@ def test_inner_clock_jump_forwards_without_other_sensors_in_between():
 
 
 @inner
-@pytest.mark.xfail(strict=True, reason=(
-    "After a forward gap OdometryPipeline.process_scan re-initialises the estimator at t_ref "
-    "and then calls est.update(t_ref, ...) with the same stamp, which the estimator rejects: "
-    "the scan is lost and counted as fusion_rejected (a wrong reason, no warning). Needed: "
-    "treat the scan after the gap like a first scan (initialise at the registered pose "
-    "reg.pose @ inv(T_base_lidar), or at the last fused pose when ICP fails, and skip "
-    "est.update)"))
 def test_inner_first_scan_after_a_forward_gap_is_not_lost():
     sim = Sim()
     sim.run(T0, 2.0)

@@ -33,6 +33,10 @@ class LidarNoiseConfig:
             the IMU/wheel prediction by many sigmas and is down-weighted instead of dragging
             the velocity and bias along.
         robust_threshold: kernel threshold on the whitened residual (sigmas).
+        robust_after_updates: the kernel is off for this many updates after (re)initialisation
+            or after an interval whose IMU samples reach 95 % of the sensor range (then the
+            velocity is not observed or corrupt, so the IMU prediction cannot be trusted; such
+            an interval itself is bridged without its IMU factor).
     """
 
     sigma_translation: float = 0.02
@@ -42,6 +46,7 @@ class LidarNoiseConfig:
     default_length: float = 10.0
     robust_kernel: str = "cauchy"
     robust_threshold: float = 1.0
+    robust_after_updates: int = 20
 
     def validate(self, prefix: str = "lidar.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -59,6 +64,7 @@ class LidarNoiseConfig:
             raise ValueError(f"{prefix}robust_kernel must be one of {', '.join(ROBUST_KERNELS)}, "
                              f"got {self.robust_kernel!r}")
         check_range(prefix + "robust_threshold", self.robust_threshold, 0.0, 100.0, lo_open=True)
+        check_range(prefix + "robust_after_updates", self.robust_after_updates, 0, 100000)
 
     def information(self) -> np.ndarray:
         """6x6 diagonal information ``(v, w)`` in the LiDAR body frame."""

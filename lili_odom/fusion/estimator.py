@@ -220,6 +220,7 @@ class FusionEstimator:
         self._since_reset = 0
         self._history: deque[tuple[float, np.ndarray]] = deque(maxlen=max(2, cfg.history_size))
         self._body_rate = np.zeros(6)  # (v, w) per second, base_link, previous interval
+        self._kernel_holdoff = self.config.lidar.robust_after_updates
         self._consecutive_failures = 0
         self.last_output: FusionOutput | None = None
 
@@ -326,6 +327,9 @@ class FusionEstimator:
         self._since_reset = 0
         self._history.clear()
         self._body_rate = np.zeros(6)
+        # the LiDAR kernel trusts the IMU prediction only once the velocity is known
+        known_velocity = sigma_v <= max(cfg.prior_sigma_velocity, cfg.prior_sigma_velocity_wheel)
+        self._kernel_holdoff = 0 if known_velocity else cfg.lidar.robust_after_updates
         self._state = None
         out = self._commit(t, 0, notes, 0, False, False, False)
         assert out is not None
@@ -448,6 +452,9 @@ class FusionEstimator:
             delta_w = None
         if delta_w is None:
             self.stats.n_no_wheel += 1
+            if T_meas is not None and len(basis):
+                notes.append(f"{len(basis)} degenerate direction(s) without wheel odometry: "
+                             "they rest on the IMU alone (large covariance)")
         omega_wheel = None
         if delta_w is not None:
             omega_wheel = wheel_information(delta_w, cfg.wheel)
@@ -474,7 +481,11 @@ class FusionEstimator:
         # A graph that the IMU factor makes unsolvable (corrupt but finite samples) is retried
         # once with the no-IMU fallback before the update is given up.
         out = None
-        for allow_imu in (True, False):
+        saturated = cfg.use_imu and self.imu.saturated(prev.t - cfg.imu.max_gap_s, t, 0.95)
+        if saturated:  # clipped samples integrate garbage: bridge with the motion model
+            notes.append("IMU samples at the sensor's range: IMU factor skipped")
+            self._kernel_holdoff = cfg.lidar.robust_after_updates
+        for allow_imu in ((False,) if saturated else (True, False)):
             # -- motion: IMU preintegration or fallback ------------------------------------------
             graph = gtsam.NonlinearFactorGraph()
             values = gtsam.Values()
@@ -527,6 +538,10 @@ class FusionEstimator:
                 Z = np.linalg.inv(T_prev) @ T_meas
                 noise = _noise_from_information(split.lidar)
                 kernel = _robust_kernel(cfg.lidar.robust_kernel, cfg.lidar.robust_threshold)
+                # the kernel trusts the IMU prediction: not while it may be wrong (samples at
+                # the sensor's range, or a velocity not yet observed after (re)initialisation)
+                if used_imu and self._kernel_holdoff > 0:
+                    kernel = None
                 if kernel is not None:
                     noise = gtsam.noiseModel.Robust.Create(kernel, noise)
                 graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(orthonormalize(Z)),
@@ -560,13 +575,17 @@ class FusionEstimator:
             return None
         self.stats.n_updates += 1
         self._consecutive_failures = 0
-        rate = log(np.linalg.inv(T_prev) @ out.pose) / dt
-        # the constant-velocity fallback never extrapolates faster than the plausibility gates
-        for part, limit in ((slice(0, 3), cfg.max_speed), (slice(3, 6), cfg.max_rate)):
-            n = float(np.linalg.norm(rate[part]))
-            if n > limit:
-                rate[part] *= limit / n
-        self._body_rate = rate
+        if dt >= 0.01:  # shorter intervals turn registration noise into absurd rates
+            rate = log(np.linalg.inv(T_prev) @ out.pose) / dt
+            # the constant-velocity fallback never extrapolates faster than the plausibility gates
+            for part, limit in ((slice(0, 3), cfg.max_speed), (slice(3, 6), cfg.max_rate)):
+                n = float(np.linalg.norm(rate[part]))
+                if n > limit:
+                    rate[part] *= limit / n
+            self._body_rate = rate
+        # after an interval without IMU the velocity is unobserved again: kernel off for a while
+        self._kernel_holdoff = (max(0, self._kernel_holdoff - 1) if out.used_imu
+                                else cfg.lidar.robust_after_updates)
         self.imu.discard_before(prev.t - 1.0)
         self._since_reset += 1
         if self._since_reset >= max(1, cfg.reset_every):
@@ -679,6 +698,7 @@ class FusionEstimator:
         """
         self._consecutive_failures += 1
         self._body_rate = np.zeros(6)
+        self._kernel_holdoff = self.config.lidar.robust_after_updates
         if self._consecutive_failures >= 3:
             prev = _State(prev.t, prev.index, prev.pose, np.zeros(3),
                           gtsam.imuBias.ConstantBias(), prev.cov_gtsam)

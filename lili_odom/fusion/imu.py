@@ -282,6 +282,12 @@ class ImuBuffer:
         b = bisect.bisect_right(self._t, t1)
         return self._s[a:b]
 
+    def saturated(self, t0: float, t1: float, fraction: float = 0.95) -> bool:
+        """True when a sample in [t0, t1] reaches ``fraction`` of the sensor's range."""
+        return any(np.abs(s.acc).max() >= fraction * self.max_abs_acc
+                   or np.abs(s.gyro).max() >= fraction * self.max_abs_gyro
+                   for s in self.samples(t0, t1))
+
     def value_at(self, t: float, max_extrapolation_s: float) -> tuple[np.ndarray, np.ndarray] | None:
         """Linearly interpolated (acc, gyro) at ``t``; held constant up to the limit beyond the
         data; None when ``t`` is farther than that from every sample."""

@@ -168,6 +168,12 @@ class WheelBuffer:
             del self._T[:k]
         return True
 
+    def samples(self, t0: float, t1: float) -> list[tuple[float, np.ndarray]]:
+        """``(t, T_odom_base)`` pairs with t0 <= t <= t1 (sorted)."""
+        a = bisect.bisect_left(self._t, t0)
+        b = bisect.bisect_right(self._t, t1)
+        return list(zip(self._t[a:b], self._T[a:b]))
+
     def pose_at(self, t: float) -> np.ndarray | None:
         """Wheel pose at ``t`` (interpolated on SE(3)); None when not covered."""
         if not self._t or not math.isfinite(t):

@@ -30,6 +30,7 @@ from lili_odom import geometry
 from lili_odom.degeneracy.hessian import HessianConfig, HessianDetector, ZhangConfig, ZhangDetector
 from lili_odom.degeneracy.lili import LiliConfig, LiliDetector
 from lili_odom.degeneracy.result import DegeneracyResult
+from lili_odom.errors import ThrottledWarnings
 from lili_odom.fusion.config import FusionConfig
 from lili_odom.fusion.estimator import FusionEstimator
 from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig
@@ -125,6 +126,12 @@ class OdometryPipeline:
         self._new_estimator()
         self._last_stamp: float | None = None
         self._last_output: OdometryOutput | None = None
+        self._warn = ThrottledWarnings(log)
+
+    def _skip(self, counter: str, message: str, *args) -> None:
+        """Count a skipped scan under ``counter`` and say why (throttled per counter)."""
+        self.counters[counter] += 1
+        self._warn.warning(counter, "scan skipped (%s): " + message, counter, *args)
 
     # ------------------------------------------------------------------ set-up and inputs
     def _new_estimator(self) -> None:
@@ -145,10 +152,23 @@ class OdometryPipeline:
         self.reset(count=False)
         self.estimator.imu, self.estimator.wheels = imu, wheels
 
-    def reset(self, count: bool = True) -> None:
-        """Forget map, state and buffers (clock jump backwards, new bag loop)."""
+    def reset(self, count: bool = True, keep_from: float | None = None) -> None:
+        """Forget map, state and buffers (clock jump backwards, new bag loop).
+
+        Args:
+            keep_from: keep the buffered IMU/wheel samples stamped at or after this time [s]
+                and before the old timeline resumes (the new timeline's samples that arrived
+                before the scan that revealed the jump).
+        """
+        old = self.estimator
         self._matcher.reset()
         self._new_estimator()
+        if keep_from is not None and self._last_stamp is not None:
+            t1 = self._last_stamp - self.config.max_backward_jump_s
+            for s in old.imu.samples(keep_from, t1):
+                self.estimator.add_imu(s.t, s.acc, s.gyro)
+            for t, T in old.wheels.samples(keep_from, t1):
+                self.estimator.add_wheel(t, T)
         self._last_stamp = None
         self._last_output = None
         if count:
@@ -174,8 +194,9 @@ class OdometryPipeline:
     def _sweep_times(self, scan: Scan) -> tuple[np.ndarray, float, float]:
         times = scan.times
         if times is None or len(times) != len(scan.points) or not np.all(np.isfinite(times)):
-            # no per-point time: assume the sweep ends at the stamp's end of sweep, no deskew
-            return np.zeros(len(scan.points)), scan.stamp, scan.stamp
+            # no per-point time: the sweep ends sweep_duration after its stamp; no deskew
+            t_end = scan.stamp + self.config.sweep_duration
+            return np.zeros(len(scan.points)), t_end, t_end
         return times, scan.stamp + float(times.min()), scan.stamp + float(times.max())
 
     def process_scan(self, scan: Scan) -> OdometryOutput | None:
@@ -191,35 +212,43 @@ class OdometryPipeline:
             scan = Scan(scan.stamp, points, None if scan.times is None else scan.times[finite],
                         scan.frame_id, scan.dropped + int((~finite).sum()))
         if not np.isfinite(scan.stamp):
-            self.counters["skipped_bad_stamp"] += 1
+            self._skip("skipped_bad_stamp", "non-finite stamp")
             return None
         if len(points) < self.config.min_points:
-            self.counters["skipped_too_few_points"] += 1
-            log.warning("scan at %.3f skipped: %d valid points", scan.stamp, len(points))
+            self._skip("skipped_too_few_points", "%d valid points at %.3f, need %d", len(points),
+                       scan.stamp, self.config.min_points)
             return None
         times, t_first, t_ref = self._sweep_times(scan)
+        reinit_pose = None
         if self._last_stamp is not None:
             if t_ref < self._last_stamp - self.config.max_backward_jump_s:
                 log.warning("clock jumped back %.3f s: resetting", self._last_stamp - t_ref)
-                self.reset()
+                self.reset(keep_from=t_first - self.config.fusion.gravity_window_s)
                 self.counters["clock_jumps_back"] += 1
                 warnings.append("clock jump backwards: pipeline reset")
             elif t_ref <= self._last_stamp:
-                self.counters["skipped_stale_stamp"] += 1
+                self._skip("skipped_stale_stamp", "stamp %.3f not after the previous %.3f",
+                           t_ref, self._last_stamp)
                 return None
             elif t_ref - self._last_stamp > self.config.max_forward_gap_s:
                 self.counters["forward_gaps"] += 1
-                warnings.append(f"{t_ref - self._last_stamp:.2f} s gap: re-initialised at the last pose")
-                last = self._last_output
-                self._new_estimator()
-                self.estimator.initialize(t_ref, pose=last.pose if last else None)
-                self._last_stamp = t_ref
+                gap = t_ref - self._last_stamp
+                self._warn.warning("forward_gaps", "%.2f s gap before the scan at %.3f: "
+                                   "re-initialised at the registered pose", gap, t_ref)
+                warnings.append(f"{gap:.2f} s gap: re-initialised at the registered pose")
+                old = self.estimator
+                self._new_estimator()  # keeps the map; the state restarts at this scan
+                self.estimator.imu, self.estimator.wheels = old.imu, old.wheels
+                reinit_pose = self._last_output.pose if self._last_output is not None else None
 
         est = self.estimator
         first = not est.initialized
         t0 = time.perf_counter()
         T_bl = self.T_base_lidar
-        if first:
+        if first and reinit_pose is not None:
+            sweep_motion = np.eye(4)
+            guess = reinit_pose @ T_bl
+        elif first:
             est.initialize(t_ref)
             sweep_motion = np.eye(4)
             guess = est.predict(t_ref) @ T_bl
@@ -234,7 +263,8 @@ class OdometryPipeline:
         frame, map_points, source = self._matcher.preprocess(points, times, sweep_motion)
         timings["deskew"] = time.perf_counter() - t0
         if len(source) < 10:
-            self.counters["skipped_too_few_points"] += 1
+            self._skip("skipped_too_few_points", "%d points left after voxelisation at %.3f",
+                       len(source), t_ref)
             return None
 
         t0 = time.perf_counter()
@@ -261,14 +291,18 @@ class OdometryPipeline:
         timings["detector"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
-        if first:
+        if first and reinit_pose is not None:
+            start = reg.pose @ np.linalg.inv(T_bl) if reg.ok else reinit_pose
+            fused = est.initialize(t_ref, pose=start)
+        elif first:
             fused = est.last_output
         else:
             T_icp_base = reg.pose @ np.linalg.inv(T_bl) if reg.ok else None
             fused = est.update(t_ref, T_icp_base, degeneracy)
         timings["fusion"] = time.perf_counter() - t0
         if fused is None:
-            self.counters["fusion_rejected"] += 1
+            self._skip("fusion_rejected", "the estimator rejected the update at %.3f (%s)", t_ref,
+                       est.stats.last_failure or "stamp or solver")
             return None
         warnings += list(fused.notes)
 
