@@ -79,6 +79,10 @@ class NodeConfig:
         publish_tf: publish ``odom_frame -> base_frame`` on ``/tf`` when tf2_msgs exists.
         map_publish_period_s: period of the latched ``~/map`` [s].
         path_max_poses: poses kept in ``~/path``.
+        path_period: period of ``~/path`` [s of stamp time] (0: every scan).
+        diagnostics_period: period of the node's diagnostics log line [s of wall time]
+            (0: off).
+        marker_arrow_length: length of the ``~/degeneracy`` arrows [m].
     """
 
     lidar_topic: str = "/ouster/points"
@@ -90,6 +94,9 @@ class NodeConfig:
     publish_tf: bool = True
     map_publish_period_s: float = 2.0
     path_max_poses: int = 20000
+    path_period: float = 1.0
+    diagnostics_period: float = 10.0
+    marker_arrow_length: float = 2.0
     extrinsics: ExtrinsicsConfig = field(default_factory=ExtrinsicsConfig)
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
 
@@ -99,6 +106,10 @@ class NodeConfig:
         check_range("map_publish_period_s", self.map_publish_period_s, 0.0, 3600.0,
                     lo_open=True, unit="s")
         check_range("path_max_poses", self.path_max_poses, 1, 10**7)
+        check_range("path_period", self.path_period, 0.0, 3600.0, unit="s")
+        check_range("diagnostics_period", self.diagnostics_period, 0.0, 3600.0, unit="s")
+        check_range("marker_arrow_length", self.marker_arrow_length, 0.0, 1000.0, lo_open=True,
+                    unit="m")
         self.extrinsics.validate()
         _check_ranges(self)
         self.pipeline.fusion.validate("pipeline.fusion.")

@@ -18,8 +18,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     parser.add_argument("--resolution", default="128x1024", help="OS1 ROWSxCOLS of the bags")
     parser.add_argument("--seed", type=int, default=0, help="simulator seed")
+    parser.add_argument("--start", type=float, default=0.0,
+                        help="start of the piece of each trial [s] (default: its beginning)")
     parser.add_argument("--duration", type=float, default=None,
-                        help="only the first N seconds of each trial (default: whole trials)")
+                        help="only N seconds of each trial (default: to its end)")
     parser.add_argument("--out", type=Path, default=Path("tunnel_evaluation"),
                         help="report directory (tunnel.md, tunnel.json, figures)")
     parser.add_argument("--work-dir", type=Path, default=None,
@@ -40,12 +42,14 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--jobs must be >= 1")
     if args.duration is not None and not args.duration > 0:
         raise UserError("--duration must be > 0 s")
+    if not args.start >= 0:
+        raise UserError("--start must be >= 0 s")
     if args.config is not None and not args.config.is_file():
         raise UserError(f"{args.config}: no such parameter file")
     ev = TunnelEvaluation(out_dir=args.out, work_dir=args.work_dir or args.out / "runs",
                           trials=tuple(args.trials), methods=tuple(args.methods),
                           resolution=args.resolution, seed=args.seed, jobs=args.jobs,
-                          duration=args.duration,
+                          start=args.start, duration=args.duration,
                           reuse=args.reuse, progress=not args.no_progress,
                           cache_dir=args.cache_dir, config=args.config)
     report = evaluate_tunnel(ev)

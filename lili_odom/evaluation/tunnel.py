@@ -47,7 +47,8 @@ class TunnelEvaluation:
         work_dir: per-run outputs (``<work_dir>/trial<N>_<resolution>/<method>/``).
         cache_dir: simulator bag cache (None: ``$LILI_ODOM_SIM_CACHE`` or ``data/sim``).
         config: ROS 2 parameter file for the odometry (None: built-in defaults).
-        duration: only the first ``duration`` seconds of each trial (None: whole trials).
+        start: start of the piece of each trial [s of trial time].
+        duration: only ``duration`` seconds of each trial from ``start`` (None: to the end).
     """
 
     out_dir: Path
@@ -56,6 +57,7 @@ class TunnelEvaluation:
     methods: tuple[str, ...] = METHODS
     resolution: str = "128x1024"
     seed: int = 0
+    start: float = 0.0
     duration: float | None = None
     jobs: int = 1
     reuse: bool = False
@@ -99,7 +101,8 @@ def evaluate_tunnel(ev: TunnelEvaluation) -> dict:
     for trial in ev.trials:
         print(f"trial {trial}: bag ({ev.resolution}, seed {ev.seed}) ...", flush=True)
         bags[trial] = ensure_trial_bag(trial, ev.cache_dir, world="tunnel", seed=ev.seed,
-                                       resolution=ev.resolution, duration=ev.duration,
+                                       resolution=ev.resolution, start=ev.start,
+                                       duration=ev.duration,
                                        progress=ev.progress)
     jobs: dict[tuple[int, str], Path] = {}
     summaries: dict[tuple[int, str], dict] = {}
@@ -137,7 +140,8 @@ def evaluate_tunnel(ev: TunnelEvaluation) -> dict:
 
 
 def _trial_dir(ev: TunnelEvaluation, trial: int) -> Path:
-    piece = f"_{ev.duration:g}s" if ev.duration else ""
+    piece = f"_from{ev.start:g}s" if ev.start else ""
+    piece += f"_{ev.duration:g}s" if ev.duration else ""
     return ev.work_dir / f"trial{trial}_{ev.resolution}_seed{ev.seed}{piece}"
 
 
@@ -171,7 +175,8 @@ def _report(ev: TunnelEvaluation, bags: dict, summaries: dict) -> dict:
             row["targets"] = {k: {"target": v, "met": row[k] is not None and row[k] <= v}
                               for k, v in target.items()}
             rows.append(row)
-    return {"resolution": ev.resolution, "seed": ev.seed, "duration": ev.duration,
+    return {"resolution": ev.resolution, "seed": ev.seed, "start": ev.start,
+            "duration": ev.duration,
             "methods": list(ev.methods),
             "trials": list(ev.trials), "fail_rule": FAIL_RULE, "targets": TARGETS,
             "command": _command(ev), "rows": rows}
@@ -180,6 +185,8 @@ def _report(ev: TunnelEvaluation, bags: dict, summaries: dict) -> dict:
 def _command(ev: TunnelEvaluation) -> str:
     parts = ["lili-odom evaluate", "--trials", *map(str, ev.trials), "--methods", *ev.methods,
              "--resolution", ev.resolution, "--seed", str(ev.seed)]
+    if ev.start:
+        parts += ["--start", f"{ev.start:g}"]
     if ev.duration:
         parts += ["--duration", f"{ev.duration:g}"]
     return " ".join(parts)
@@ -194,7 +201,8 @@ def _markdown(report: dict) -> str:
         "# Tunnel evaluation (Table II)",
         "",
         f"Simulated Husky tunnel, OS1 at {report['resolution']}, seed {report['seed']}"
-        + (f", first {report['duration']:g} s of each trial" if report.get("duration") else "")
+        + (f", from {report['start']:g} s" if report.get("start") else "")
+        + (f", {report['duration']:g} s of each trial" if report.get("duration") else "")
         + ". "
         f"Produced by `{report['command']}` (`benchmarks/tunnel.py` runs the default set).",
         "",

@@ -69,9 +69,8 @@ from lili_odom.ros.queues import LatestSlot, SampleBuffer
 
 __all__ = ["LiliOdomNode", "NODE_PARAMETERS", "main", "parameters_from_mapping"]
 
-#: Parameters the node itself reads, with fallback defaults. All but the last three are also
-#: ``lili_odom.config.NodeConfig`` fields (the provider's defaults win); ``path_period``,
-#: ``diagnostics_period`` and ``marker_arrow_length`` exist only on the node.
+#: Parameters the node itself reads, with fallback defaults for providers that do not declare
+#: them; all are ``lili_odom.config.NodeConfig`` fields (the provider's defaults win).
 NODE_PARAMETERS: dict[str, Any] = {
     "lidar_topic": "/ouster/points",
     "imu_topic": "/ouster/imu",
