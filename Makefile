@@ -5,7 +5,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test install benchmark-shapes clean
+.PHONY: demo test install benchmark-shapes benchmark-tunnel benchmark-speed clean
 
 $(STAMP): setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -26,6 +26,12 @@ demo: $(STAMP)
 
 benchmark-shapes: $(STAMP)
 	$(PY) benchmarks/shapes.py
+
+benchmark-tunnel: $(STAMP)
+	$(PY) benchmarks/tunnel.py
+
+benchmark-speed: $(STAMP)
+	$(PY) benchmarks/speed.py
 
 clean:
 	rm -rf $(VENV) build install log *.egg-info

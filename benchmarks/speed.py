@@ -1,0 +1,530 @@
+"""Speed of the odometry on full OS1-128 scans (issue #5) into benchmarks/results/speed.{md,json}.
+
+    python benchmarks/speed.py                        # 300 scans from 90 s and from 5 s of Trial 1
+    python benchmarks/speed.py --scans 30 --start 90 --methods kiss lili
+
+On the same scans of the simulated tunnel Trial 1 (128 x 1024, seed 0, from the simulator
+cache; generated first if absent, about 200 s), one after the other, each in its own fresh
+process so that the peak RSS is per method:
+
+* ``kiss``: KISS-ICP alone, ``KissICP.register_frame`` on the parsed points (range 1-100 m,
+  our voxel size, deskewing with its constant-velocity model, per-point times in [0, 1]);
+* ``none``, ``zhang``, ``hessian``, ``lili``: our pipeline (``MessageFeeder`` ->
+  ``OdometryPipeline``, exactly as ``lili-odom run`` drives it) with that detector.
+
+Each window starts ``--start`` seconds into the trial (default: 90 s, a featureless,
+degenerate stretch, and 5 s, the cluttered entrance). IMU and wheel messages from
+``gravity_window_s + 0.5`` s before the window are fed so the estimator initialises as it
+would on a robot; ``/tf_static`` is fed first. The bag is read and decoded message by message
+*outside* the timings; what is timed is what the node does per message: cloud parsing
+(``messages.scan_from_msg``), IMU/wheel buffering and the pipeline stages. The first
+``--warmup`` scans (local map filling up, first scan without detector) are run but not counted.
+
+Reported per method: scans/s (timed scans / time spent in the feeder, resp. in parsing plus
+``register_frame`` for KISS-ICP), mean and p95 per-stage times [ms] (parse, predict, deskew
+incl. voxelisation, ICP, detector, iSAM2, map update, total = parse + pipeline), the time
+ratio to KISS-ICP alone, peak RSS, and the targets: ``lili`` >= 10 scans/s (the OS1 spins at
+10 Hz), the LiLi detector <= 50 ms per scan on average, ``lili`` at most 2x KISS-ICP's time.
+The machine (CPU, cores), the git commit (and uncommitted changes under ``lili_odom/``) and
+the load other processes put on the machine during the run are recorded with the figures.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import platform
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+METHODS = ("kiss", "none", "zhang", "lili")
+ALL_METHODS = ("kiss", "none", "zhang", "hessian", "lili")
+STAGES = ("parse", "predict", "deskew", "icp", "detector", "fusion", "map", "total")
+STAGE_TITLES = {"parse": "parse", "predict": "predict", "deskew": "deskew", "icp": "ICP",
+                "detector": "detector", "fusion": "iSAM2", "map": "map", "total": "total"}
+KISS_STAGES = ("parse", "deskew", "icp", "map", "total")  # the others do not exist in KISS-ICP
+TARGET_SCANS_PER_S = 10.0
+GOAL_SCANS_PER_S = 20.0
+TARGET_DETECTOR_MS = 50.0
+TARGET_KISS_RATIO = 2.0
+WINDOW_NAMES = {90.0: "featureless tunnel (degenerate)", 5.0: "entrance (not degenerate)"}
+
+
+# ----------------------------------------------------------------------------- one method
+
+def _window_reader(bag: Path, topics: list[str], log_start: float):
+    """A :class:`BagReader` whose header-stamp-ordered iteration starts at ``log_start`` [s]."""
+    from lili_odom.bagio.reader import BagReader
+
+    class WindowReader(BagReader):
+        def raw_messages(self, start: float | None = None):
+            return super().raw_messages(log_start if start is None else start)
+
+    return WindowReader(bag, topics=topics, required=[topics[0]])
+
+
+def _tf_static(bag: Path):
+    """The bag's first ``/tf_static`` message (None when it has none)."""
+    from lili_odom.bagio.reader import BagReader
+
+    with BagReader(bag, topics=["/tf_static"], required=[]) as reader:
+        for item in reader:
+            return item.msg
+    return None
+
+
+def _stage_stats(per_scan: dict[str, list[float]], stages) -> dict[str, dict[str, float] | None]:
+    out: dict[str, dict[str, float] | None] = {}
+    for k in STAGES:
+        v = np.asarray(per_scan.get(k, []), dtype=float) * 1e3
+        if k not in stages or not len(v):
+            out[k] = None
+            continue
+        out[k] = {"mean_ms": float(np.mean(v)), "p95_ms": float(np.percentile(v, 95)),
+                  "max_ms": float(np.max(v))}
+    return out
+
+
+def _rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB on Linux
+
+
+def run_method(bag: Path | str, method: str, start: float, scans: int, warmup: int,
+               progress: bool = False) -> dict[str, Any]:
+    """Run ``method`` over ``scans`` scans from ``start`` s into the bag, in this process.
+
+    Returns a JSON-ready dict: scans, scans_per_s, stages (mean/p95/max ms or None),
+    rss_peak_mb, rss_setup_mb, degenerate_fraction, counters.
+    """
+    from lili_odom import messages
+    from lili_odom.config import load_config
+
+    logging.basicConfig(level=logging.ERROR)
+    bag = Path(bag)
+    config = load_config(None)
+    if method != "kiss":
+        config.pipeline.method = method
+    config.validate()
+    sm = config.pipeline.scan_matcher
+    topics = [config.lidar_topic, config.imu_topic, config.wheel_topic]
+
+    parse_fn = messages.default_cloud_parser(sm.min_range, sm.max_range)
+    original_scan_from_msg = messages.scan_from_msg
+    parse_times: dict[float, float] = {}
+
+    def timed_scan_from_msg(msg, parse=None):
+        t0 = time.perf_counter()
+        scan = original_scan_from_msg(msg, parse)
+        parse_times[scan.stamp] = time.perf_counter() - t0
+        return scan
+
+    per_scan: dict[str, list[float]] = {k: [] for k in STAGES}
+    dims: list[int] = []
+    n_out = 0
+    timed_s = 0.0  # time spent in the timed region (after the warm-up scans)
+
+    def record(timings: dict[str, float], dim: int) -> None:
+        nonlocal n_out
+        n_out += 1
+        if n_out <= warmup:
+            return
+        for k, v in timings.items():
+            per_scan[k].append(v)
+        dims.append(dim)
+
+    tf_msg = _tf_static(bag)
+    with _window_reader(bag, topics, 0.0) as probe:
+        t_bag0 = probe.start_time
+    t_window = t_bag0 + start
+    lead = config.pipeline.fusion.gravity_window_s + 0.5
+    reader = _window_reader(bag, topics, max(t_bag0, t_window - lead))
+
+    counters: dict[str, int] = {}
+    if method == "kiss":
+        from kiss_icp.config import KISSConfig
+        from kiss_icp.kiss_icp import KissICP
+
+        kc = KISSConfig()
+        kc.data.max_range = sm.max_range
+        kc.data.min_range = sm.min_range
+        kc.data.deskew = True
+        kc.mapping.voxel_size = sm.voxel
+        kc.mapping.max_points_per_voxel = sm.max_points_per_voxel
+        kc.registration.max_num_iterations = sm.max_iterations
+        kc.registration.convergence_criterion = sm.convergence
+        kc.registration.max_num_threads = sm.max_threads
+        kc.adaptive_threshold.initial_threshold = sm.initial_threshold
+        kc.adaptive_threshold.min_motion_th = sm.min_motion_th
+        kiss = KissICP(kc)
+        stage_acc: dict[str, float] = {}
+
+        def timed(fn, stage):
+            def wrapper(*a, **kw):
+                t0 = time.perf_counter()
+                try:
+                    return fn(*a, **kw)
+                finally:
+                    stage_acc[stage] = stage_acc.get(stage, 0.0) + time.perf_counter() - t0
+            return wrapper
+
+        # KissICP.register_frame itself, with its building blocks timed in place
+        kiss.preprocessor.preprocess = timed(kiss.preprocessor.preprocess, "deskew")
+        kiss.voxelize = timed(kiss.voxelize, "deskew")
+        kiss.registration.align_points_to_map = timed(kiss.registration.align_points_to_map, "icp")
+        kiss.adaptive_threshold.update_model_deviation = timed(
+            kiss.adaptive_threshold.update_model_deviation, "map")
+        kiss.local_map.update = timed(kiss.local_map.update, "map")
+    else:
+        from lili_odom.pipeline.feeder import MessageFeeder
+        from lili_odom.pipeline.odometry import OdometryPipeline
+
+        messages.scan_from_msg = timed_scan_from_msg  # what the feeder calls
+        pipeline = OdometryPipeline(config.pipeline)
+        feeder = MessageFeeder(pipeline, config)
+        process_scan = pipeline.process_scan
+
+        def timed_process_scan(scan):
+            out = process_scan(scan)
+            parse = parse_times.pop(scan.stamp, float("nan"))
+            if out is not None:
+                t = {k: out.timings.get(k, float("nan")) for k in STAGES if k not in ("parse", "total")}
+                t["parse"] = parse
+                t["total"] = parse + out.timings["total"]
+                record(t, out.degeneracy.dimension if out.degeneracy is not None else 0)
+            return out
+
+        pipeline.process_scan = timed_process_scan
+        if tf_msg is not None:
+            feeder.feed("/tf_static", tf_msg)
+
+    rss_setup = _rss_mb()
+    fed = 0
+    t_report = time.monotonic()
+    with reader:
+        for item in reader:
+            if item.topic == config.lidar_topic:
+                if item.stamp < t_window - 1e-6:
+                    continue
+                if fed >= scans:
+                    if method == "kiss":
+                        break
+                    continue  # keep feeding IMU/wheels until the last scan has its data
+                fed += 1
+            if method == "kiss":
+                if item.topic != config.lidar_topic:
+                    continue
+                stage_acc.clear()
+                t0 = time.perf_counter()
+                scan = timed_scan_from_msg(item.msg, parse_fn)
+                t1 = time.perf_counter()
+                pts = scan.points
+                finite = np.all(np.isfinite(pts), axis=1)
+                pts = pts[finite]
+                times = np.zeros(0)
+                if scan.times is not None and len(scan.times) == len(finite):
+                    t = scan.times[finite]
+                    if len(t) and np.all(np.isfinite(t)) and np.ptp(t) > 0:
+                        times = (t - t.min()) / np.ptp(t)
+                kiss.register_frame(pts, times)
+                t2 = time.perf_counter()
+                record({"parse": t1 - t0, "total": t2 - t0,
+                        **{k: stage_acc.get(k, 0.0) for k in ("deskew", "icp", "map")}}, 0)
+                if n_out > warmup:
+                    timed_s += t2 - t0
+            else:
+                counting = n_out >= warmup
+                t0 = time.perf_counter()
+                feeder.feed(item.topic, item.msg)
+                if counting:
+                    timed_s += time.perf_counter() - t0
+                if fed >= scans and not feeder.pending:
+                    break
+            if progress and time.monotonic() - t_report > 10.0:
+                t_report = time.monotonic()
+                print(f"    {method} @ {start:g} s: {n_out}/{scans} scans", file=sys.stderr,
+                      flush=True)
+        if method != "kiss":
+            counting = n_out >= warmup
+            t0 = time.perf_counter()
+            feeder.flush()
+            if counting:
+                timed_s += time.perf_counter() - t0
+            counters = {k: int(v) for k, v in pipeline.counters.items()}
+    messages.scan_from_msg = original_scan_from_msg
+    n = len(per_scan["total"])
+    stages = KISS_STAGES if method == "kiss" else STAGES
+    return {
+        "method": method,
+        "start_s": start,
+        "scans_fed": fed,
+        "scans_processed": n_out,
+        "scans_timed": n,
+        "warmup": warmup,
+        "timed_s": timed_s,
+        "scans_per_s": n / timed_s if timed_s > 0 else float("nan"),
+        "stages": _stage_stats(per_scan, stages),
+        "rss_peak_mb": _rss_mb(),
+        "rss_setup_mb": rss_setup,
+        "degenerate_fraction": float(np.mean(np.asarray(dims) > 0)) if dims else 0.0,
+        "counters": counters,
+    }
+
+
+# ----------------------------------------------------------------------------- machine
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _cpu_busy_jiffies() -> tuple[int, int]:
+    """(busy, total) jiffies of the whole machine from /proc/stat."""
+    f = [int(x) for x in Path("/proc/stat").read_text().splitlines()[0].split()[1:]]
+    idle = f[3] + (f[4] if len(f) > 4 else 0)
+    return sum(f) - idle, sum(f)
+
+
+def _git(*args: str) -> str:
+    try:
+        return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True,
+                              timeout=20).stdout.rstrip()
+    except (OSError, subprocess.SubprocessError):
+        return ""
+
+
+def _other_processes(min_cpu: float = 10.0, limit: int = 6) -> list[str]:
+    """The busiest other processes (lifetime %CPU >= min_cpu), paths reduced to file names."""
+    try:
+        out = subprocess.run(["ps", "-eo", "pid=,pcpu=,args="], capture_output=True, text=True,
+                             timeout=20).stdout
+    except (OSError, subprocess.SubprocessError):
+        return []
+    mine = {os.getpid(), os.getppid()}
+    rows = []
+    for line in out.splitlines():
+        parts = line.split(None, 2)
+        if len(parts) < 3:
+            continue
+        pid, cpu, args = int(parts[0]), float(parts[1]), parts[2]
+        if pid in mine or cpu < min_cpu or args.startswith("ps "):
+            continue
+        words = [Path(w).name if "/" in w else w for w in args.split()][:6]
+        rows.append((cpu, f"{cpu:.0f} % {' '.join(words)}"))
+    return [r for _, r in sorted(rows, reverse=True)[:limit]]
+
+
+def machine_info() -> dict[str, Any]:
+    dirty = [line[3:] for line in _git("status", "--porcelain", "--", "lili_odom").splitlines()]
+    return {"cpu": _cpu_model(), "cores": os.cpu_count(), "python": platform.python_version(),
+            "commit": _git("rev-parse", "--short", "HEAD").strip(), "uncommitted_lili_odom": dirty}
+
+
+# ----------------------------------------------------------------------------- driver
+
+def _run_in_fresh_process(bag: Path, method: str, start: float, scans: int, warmup: int,
+                          progress: bool) -> dict[str, Any]:
+    with tempfile.TemporaryDirectory(prefix="lili_speed_") as tmp:
+        out = Path(tmp) / "result.json"
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", str(out), "--bag", str(bag),
+               "--methods", method, "--start", repr(start), "--scans", str(scans),
+               "--warmup", str(warmup)]
+        if not progress:
+            cmd.append("--no-progress")
+        proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=None, text=True)
+        if proc.returncode != 0 or not out.exists():
+            raise RuntimeError(f"{method} @ {start:g} s failed (exit {proc.returncode}): "
+                               f"{proc.stdout[-2000:]}")
+        return json.loads(out.read_text())
+
+
+def _targets(results: dict[str, dict]) -> dict[str, Any]:
+    lili, kiss = results.get("lili"), results.get("kiss")
+    t: dict[str, Any] = {}
+    if lili is not None:
+        t["lili_scans_per_s"] = {"value": lili["scans_per_s"], "target": TARGET_SCANS_PER_S,
+                                 "goal": GOAL_SCANS_PER_S,
+                                 "met": lili["scans_per_s"] >= TARGET_SCANS_PER_S}
+        det = lili["stages"]["detector"]["mean_ms"]
+        t["lili_detector_mean_ms"] = {"value": det, "target": TARGET_DETECTOR_MS,
+                                      "met": det <= TARGET_DETECTOR_MS}
+        if kiss is not None:
+            ratio = kiss["scans_per_s"] / lili["scans_per_s"]
+            t["lili_time_vs_kiss"] = {"value": ratio, "target": TARGET_KISS_RATIO,
+                                      "met": ratio <= TARGET_KISS_RATIO}
+    return t
+
+
+def benchmark(bag: Path | str, methods=METHODS, starts=(90.0, 5.0), scans: int = 300,
+              warmup: int = 10, progress: bool = True) -> dict[str, Any]:
+    """Every method on every window, each in a fresh process; the JSON-ready results."""
+    bag = Path(bag)
+    busy0, total0 = _cpu_busy_jiffies()
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    load0 = os.getloadavg()
+    others0 = _other_processes()
+    t0 = time.monotonic()
+    windows = []
+    for start in starts:
+        res: dict[str, dict] = {}
+        for method in methods:
+            if progress:
+                print(f"[{start:g} s] {method}: {scans} scans ...", flush=True)
+            r = _run_in_fresh_process(bag, method, float(start), scans, warmup, progress)
+            res[method] = r
+            if progress:
+                tot = r["stages"]["total"]
+                det = r["stages"]["detector"]
+                print(f"[{start:g} s] {method}: {r['scans_per_s']:.1f} scans/s, total "
+                      f"{tot['mean_ms']:.1f} ms (p95 {tot['p95_ms']:.1f})"
+                      + (f", detector {det['mean_ms']:.1f} ms" if det else "")
+                      + f", peak RSS {r['rss_peak_mb']:.0f} MB", flush=True)
+        kiss = res.get("kiss")
+        for r in res.values():
+            r["time_vs_kiss"] = (kiss["scans_per_s"] / r["scans_per_s"]) if kiss else None
+        windows.append({"start_s": float(start), "name": WINDOW_NAMES.get(float(start), ""),
+                        "methods": res, "targets": _targets(res)})
+    wall = time.monotonic() - t0
+    busy1, total1 = _cpu_busy_jiffies()
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    hz = os.sysconf("SC_CLK_TCK")
+    machine_busy = (busy1 - busy0) / hz
+    ours = (ru1.ru_utime + ru1.ru_stime) - (ru0.ru_utime + ru0.ru_stime)
+    return {
+        "bag": bag.name,
+        "scans": scans,
+        "warmup": warmup,
+        "methods": list(methods),
+        "machine": machine_info(),
+        "load": {"loadavg_before": list(load0), "loadavg_after": list(os.getloadavg()),
+                 "wall_s": wall,
+                 "other_processes_cores": max(0.0, (machine_busy - ours) / wall) if wall > 0 else 0.0,
+                 "other_processes_at_start": others0},
+        "windows": windows,
+    }
+
+
+# ----------------------------------------------------------------------------- report
+
+def _fmt(x: float | None, digits: int = 1) -> str:
+    return "–" if x is None or not np.isfinite(x) else f"{x:.{digits}f}"
+
+
+def markdown(report: dict[str, Any], command: str) -> str:
+    m, load = report["machine"], report["load"]
+    lines = [
+        "# Odometry speed on full OS1-128 scans (issue #5)",
+        "",
+        f"`{command}`: {report['scans']} scans of `{report['bag']}` per window and method "
+        f"(the first {report['warmup']} not counted), each method in its own fresh process, "
+        "one after the other. The bag is decoded outside the timings; timed is what the node "
+        "does: parsing the PointCloud2, IMU/wheel buffering and the pipeline stages.",
+        "",
+        f"Machine: {m['cpu']}, {m['cores']} cores, Python {m['python']}; commit `{m['commit']}`"
+        + (f" with uncommitted changes in {', '.join('`' + p + '`' for p in m['uncommitted_lili_odom'])}"
+           if m["uncommitted_lili_odom"] else "") + ".",
+        "",
+        f"Load: load average {load['loadavg_before'][0]:.2f} before, "
+        f"{load['loadavg_after'][0]:.2f} after; other processes used "
+        f"{load['other_processes_cores']:.2f} of {m['cores']} cores on average during the "
+        f"{load['wall_s'] / 60:.1f} min run"
+        + ("; busy at the start: " + "; ".join(f"`{p}`" for p in load["other_processes_at_start"])
+           if load["other_processes_at_start"] else "") + ".",
+        "",
+        "Cells: mean / p95 [ms per scan]. `deskew` includes the voxelisation; `total` = parse + "
+        "all pipeline stages (for KISS-ICP: parse + `register_frame`). scans/s = timed scans / "
+        "time spent in the feeder (IMU/wheel buffering included), resp. in parse + "
+        "`register_frame`. x KISS = time per scan relative to KISS-ICP alone. "
+        "– = no such stage.",
+    ]
+    for w in report["windows"]:
+        title = f"From {w['start_s']:g} s" + (f": {w['name']}" if w["name"] else "")
+        lines += ["", f"## {title}", "",
+                  "| method | scans/s | x KISS | " + " | ".join(STAGE_TITLES[k] for k in STAGES)
+                  + " | peak RSS [MB] | degenerate |",
+                  "|---|" + "---:|" * (len(STAGES) + 4)]
+        for name, r in w["methods"].items():
+            cells = []
+            for k in STAGES:
+                s = r["stages"][k]
+                cells.append("–" if s is None else f"{s['mean_ms']:.1f} / {s['p95_ms']:.1f}")
+            label = "KISS-ICP `register_frame`" if name == "kiss" else f"`{name}`"
+            deg = "–" if name == "kiss" else f"{100 * r['degenerate_fraction']:.0f} %"
+            lines.append(f"| {label} | {_fmt(r['scans_per_s'])} | {_fmt(r['time_vs_kiss'], 2)} | "
+                         + " | ".join(cells) + f" | {r['rss_peak_mb']:.0f} | {deg} |")
+        t = w["targets"]
+        if t:
+            lines += ["", "Targets:"]
+            if "lili_scans_per_s" in t:
+                x = t["lili_scans_per_s"]
+                lines.append(f"- `lili` real time (>= {x['target']:g} scans/s, goal {x['goal']:g}): "
+                             f"{x['value']:.1f} scans/s, **{'met' if x['met'] else 'not met'}**"
+                             + (" (goal met too)" if x["value"] >= x["goal"] else ""))
+            if "lili_detector_mean_ms" in t:
+                x = t["lili_detector_mean_ms"]
+                lines.append(f"- LiLi detector <= {x['target']:g} ms per scan: mean "
+                             f"{x['value']:.1f} ms, **{'met' if x['met'] else 'not met'}**")
+            if "lili_time_vs_kiss" in t:
+                x = t["lili_time_vs_kiss"]
+                lines.append(f"- `lili` at most {x['target']:g}x KISS-ICP's time: "
+                             f"{x['value']:.2f}x, **{'met' if x['met'] else 'not met'}**")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scans", type=int, default=300, help="scans per window (default 300)")
+    ap.add_argument("--start", type=float, nargs="+", default=[90.0, 5.0],
+                    help="window start(s) [s into the trial] (default: 90 5)")
+    ap.add_argument("--warmup", type=int, default=10,
+                    help="first scans of each window run but not counted (default 10)")
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=ALL_METHODS)
+    ap.add_argument("--bag", type=Path, help="bag to use (default: the cached Trial 1 bag)")
+    ap.add_argument("--resolution", default="128x1024", help="of the Trial 1 bag")
+    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results",
+                    help="directory for speed.md and speed.json")
+    ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.scans <= args.warmup:
+        ap.error("--scans must exceed --warmup")
+    if args.worker is not None:  # one method in this (fresh) process
+        r = run_method(args.bag, args.methods[0], args.start[0], args.scans, args.warmup,
+                       progress=not args.no_progress)
+        args.worker.write_text(json.dumps(r))
+        return 0
+    bag = args.bag
+    if bag is None:
+        from lili_odom.sim.generator import ensure_trial_bag
+
+        bag = ensure_trial_bag(1, resolution=args.resolution, seed=0, progress=not args.no_progress)
+    report = benchmark(bag, args.methods, args.start, args.scans, args.warmup,
+                       progress=not args.no_progress)
+    command = (f"python benchmarks/speed.py --scans {args.scans} --start "
+               f"{' '.join(f'{s:g}' for s in args.start)} --warmup {args.warmup} "
+               f"--methods {' '.join(args.methods)}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "speed.json").write_text(json.dumps(report, indent=1) + "\n")
+    (args.out / "speed.md").write_text(markdown(report, command))
+    print(f"wrote {args.out / 'speed.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
