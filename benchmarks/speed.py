@@ -301,6 +301,17 @@ def _cpu_busy_jiffies() -> tuple[int, int]:
     return sum(f) - idle, sum(f)
 
 
+def _other_load(busy0: int, children0, wall: float) -> float:
+    """Mean cores used by other processes since ``busy0`` (machine jiffies) and ``children0``
+    (our children's rusage) over ``wall`` seconds."""
+    if wall <= 0:
+        return 0.0
+    busy1, _ = _cpu_busy_jiffies()
+    c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    ours = (c1.ru_utime + c1.ru_stime) - (children0.ru_utime + children0.ru_stime)
+    return max(0.0, ((busy1 - busy0) / os.sysconf("SC_CLK_TCK") - ours) / wall)
+
+
 def _git(*args: str) -> str:
     try:
         return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True,
@@ -375,7 +386,7 @@ def benchmark(bag: Path | str, methods=METHODS, starts=(90.0, 5.0), scans: int =
               warmup: int = 10, progress: bool = True) -> dict[str, Any]:
     """Every method on every window, each in a fresh process; the JSON-ready results."""
     bag = Path(bag)
-    busy0, total0 = _cpu_busy_jiffies()
+    busy0, _ = _cpu_busy_jiffies()
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     load0 = os.getloadavg()
     others0 = _other_processes()
@@ -386,7 +397,11 @@ def benchmark(bag: Path | str, methods=METHODS, starts=(90.0, 5.0), scans: int =
         for method in methods:
             if progress:
                 print(f"[{start:g} s] {method}: {scans} scans ...", flush=True)
+            b0, _ = _cpu_busy_jiffies()
+            c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            w0 = time.monotonic()
             r = _run_in_fresh_process(bag, method, float(start), scans, warmup, progress)
+            r["other_load_cores"] = _other_load(b0, c0, time.monotonic() - w0)
             res[method] = r
             if progress:
                 tot = r["stages"]["total"]
@@ -401,11 +416,6 @@ def benchmark(bag: Path | str, methods=METHODS, starts=(90.0, 5.0), scans: int =
         windows.append({"start_s": float(start), "name": WINDOW_NAMES.get(float(start), ""),
                         "methods": res, "targets": _targets(res)})
     wall = time.monotonic() - t0
-    busy1, total1 = _cpu_busy_jiffies()
-    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    hz = os.sysconf("SC_CLK_TCK")
-    machine_busy = (busy1 - busy0) / hz
-    ours = (ru1.ru_utime + ru1.ru_stime) - (ru0.ru_utime + ru0.ru_stime)
     return {
         "bag": bag.name,
         "scans": scans,
@@ -414,7 +424,7 @@ def benchmark(bag: Path | str, methods=METHODS, starts=(90.0, 5.0), scans: int =
         "machine": machine_info(),
         "load": {"loadavg_before": list(load0), "loadavg_after": list(os.getloadavg()),
                  "wall_s": wall,
-                 "other_processes_cores": max(0.0, (machine_busy - ours) / wall) if wall > 0 else 0.0,
+                 "other_processes_cores": _other_load(busy0, ru0, wall),
                  "other_processes_at_start": others0},
         "windows": windows,
     }
@@ -451,14 +461,15 @@ def markdown(report: dict[str, Any], command: str) -> str:
         "all pipeline stages (for KISS-ICP: parse + `register_frame`). scans/s = timed scans / "
         "time spent in the feeder (IMU/wheel buffering included), resp. in parse + "
         "`register_frame`. x KISS = time per scan relative to KISS-ICP alone. "
-        "– = no such stage.",
+        "– = no such stage. other load = mean cores used by other processes while that method "
+        "ran (from /proc/stat; the bag decoding is this benchmark's own, not counted there).",
     ]
     for w in report["windows"]:
         title = f"From {w['start_s']:g} s" + (f": {w['name']}" if w["name"] else "")
         lines += ["", f"## {title}", "",
                   "| method | scans/s | x KISS | " + " | ".join(STAGE_TITLES[k] for k in STAGES)
-                  + " | peak RSS [MB] | degenerate |",
-                  "|---|" + "---:|" * (len(STAGES) + 4)]
+                  + " | peak RSS [MB] | degenerate | other load [cores] |",
+                  "|---|" + "---:|" * (len(STAGES) + 5)]
         for name, r in w["methods"].items():
             cells = []
             for k in STAGES:
@@ -467,7 +478,8 @@ def markdown(report: dict[str, Any], command: str) -> str:
             label = "KISS-ICP `register_frame`" if name == "kiss" else f"`{name}`"
             deg = "–" if name == "kiss" else f"{100 * r['degenerate_fraction']:.0f} %"
             lines.append(f"| {label} | {_fmt(r['scans_per_s'])} | {_fmt(r['time_vs_kiss'], 2)} | "
-                         + " | ".join(cells) + f" | {r['rss_peak_mb']:.0f} | {deg} |")
+                         + " | ".join(cells) + f" | {r['rss_peak_mb']:.0f} | {deg} | "
+                         f"{r.get('other_load_cores', float('nan')):.2f} |")
         t = w["targets"]
         if t:
             lines += ["", "Targets:"]
