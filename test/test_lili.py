@@ -139,3 +139,36 @@ def test_lili_config_validation():
         LiliConfig(k=1)
     with pytest.raises(ValueError):
         LiliConfig(tau_displacement=1.5)
+
+
+def test_thinned_capped_perturbation_runs_keep_the_plane_subspace():
+    ref, scan, T = plane_pair(seed=1)
+    rm = reference_for_detection(ref)
+    full = LiliDetector().detect(rm, scan, T)
+    fast = LiliDetector(LiliConfig(perturbation_points=300, perturbation_iterations=30)).detect(
+        rm, scan, T)
+    assert fast.ok and fast.dimension == full.dimension == 3
+    assert fast.details["perturbation_points"] <= 300 and full.details["perturbation_points"] == len(scan)
+    assert np.allclose(fast.projector_scaled(), full.projector_scaled(), atol=0.05)
+
+
+def test_thin_gives_at_most_n_evenly_spread_points():
+    from lili_odom.degeneracy.lili import thin
+
+    pts = np.arange(3 * 1001, dtype=float).reshape(-1, 3)
+    for n in (1, 7, 300, 1001, 5000):
+        out = thin(pts, n)
+        assert 0 < len(out) <= n and np.array_equal(out[0], pts[0])
+    assert len(thin(pts, 5000)) == 1001
+
+
+def test_perturbation_settings_validation():
+    with pytest.raises(ValueError):
+        LiliConfig(perturbation_points=-1)
+    with pytest.raises(ValueError):
+        LiliConfig(perturbation_iterations=-1)
+    det = LiliDetector(LiliConfig(perturbation_iterations=20))
+    assert det.perturbation_registration.max_iterations == 20
+    assert det.registration.max_iterations == 100
+    default = LiliDetector()
+    assert default.perturbation_registration is default.registration

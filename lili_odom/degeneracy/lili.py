@@ -29,6 +29,12 @@ re-associate at every ICP iteration):
 Defaults were chosen by measurement on the synthetic shapes (``benchmarks/shapes.py``):
 ``k = 5`` (point-to-point ICP pulls a scan back from ~1.5 map spacings, so ``k = 3`` under-
 detects), ``tau_displacement = 0.2``, ``tau_pca = 0.25``, 100 ICP iterations at 1e-3.
+
+Cost: almost all of it is the 12 perturbed KISS-ICP runs (each runs to convergence, typically
+10-70 iterations; the native call holds the GIL, so Python threads do not overlap them). The
+opt-in ``perturbation_points`` / ``perturbation_iterations`` / ``both_signs=False`` make the runs
+cheaper but change the detected subspace on odometry inputs (``benchmarks/lili_speed.py``), so
+the defaults stay the paper's.
 """
 from __future__ import annotations
 
@@ -58,7 +64,16 @@ class LiliConfig:
         sparsify: l1-sparsify the PCA basis.
         ratio_points: scan points used for the displacement medians (evenly thinned).
         min_points: fewer finite scan points -> ``ok = False``.
-        registration: f_opt settings for the perturbed re-registrations and P_opt.
+        registration: f_opt settings for P_opt and (unless overridden below) the perturbed
+            re-registrations.
+        perturbation_points: scan points used in the perturbed re-registrations (evenly
+            thinned from the detection scan; 0 = all). Each ICP iteration costs time
+            proportional to this count.
+        perturbation_iterations: ICP iteration cap of each perturbed re-registration (0 =
+            ``registration.max_iterations``); the convergence criterion stays
+            ``registration.convergence``. A degenerate direction does not come back however
+            long ICP runs, and a pulled-back one only has to come back below ``sqrt(tau_pca)``
+            of the perturbation for the PCA to reject it.
     """
 
     k: int = 5
@@ -71,6 +86,8 @@ class LiliConfig:
     registration: RegistrationConfig = field(
         default_factory=lambda: RegistrationConfig(max_iterations=100, convergence=1e-3)
     )
+    perturbation_points: int = 0
+    perturbation_iterations: int = 0
 
     def __post_init__(self) -> None:
         self.validate()
@@ -85,6 +102,11 @@ class LiliConfig:
             raise ValueError(f"tau_pca must be > 0, got {self.tau_pca}")
         if self.ratio_points < 1 or self.min_points < 10:
             raise ValueError("ratio_points must be >= 1 and min_points >= 10")
+        if self.perturbation_points < 0:
+            raise ValueError(f"perturbation_points must be >= 0, got {self.perturbation_points}")
+        if self.perturbation_iterations < 0:
+            raise ValueError(
+                f"perturbation_iterations must be >= 0, got {self.perturbation_iterations}")
         self.registration.__post_init__()
 
 
@@ -95,6 +117,11 @@ def perturbation_twists(spacing: float, length: float, k: int, both_signs: bool)
     steps = np.concatenate([np.full(3, d), np.full(3, d / length)])
     deltas = np.diag(steps)
     return np.vstack([deltas, -deltas]) if both_signs else deltas
+
+
+def thin(points: np.ndarray, n: int) -> np.ndarray:
+    """Every ``ceil(N / n)``-th row of ``points``: at most ``n`` evenly spread points."""
+    return points[:: max(1, -(-len(points) // max(n, 1)))]
 
 
 def _median_displacement(T: np.ndarray, points: np.ndarray) -> float:
@@ -125,6 +152,11 @@ class LiliDetector:
         rc = self.config.registration
         self.registration = registration or GuardedRegistration(
             rc.max_iterations, rc.convergence, rc.max_threads
+        )
+        iterations = self.config.perturbation_iterations or rc.max_iterations
+        self.perturbation_registration = (
+            self.registration if iterations == self.registration.max_iterations
+            else GuardedRegistration(iterations, rc.convergence, rc.max_threads)
         )
 
     def detect(
@@ -167,19 +199,21 @@ class LiliDetector:
             P_opt = geometry.orthonormalize(optimized_pose)
 
         probe = scan[:: max(1, len(scan) // cfg.ratio_points)]
+        moved = thin(scan, cfg.perturbation_points) if cfg.perturbation_points else scan
         deltas = perturbation_twists(s, L, cfg.k, cfg.both_signs)
         twists = np.zeros_like(deltas)
         ratios = np.zeros(len(deltas))
         valid = np.zeros(len(deltas), dtype=bool)
+        P_opt_inv = np.linalg.inv(P_opt)
         for i, delta in enumerate(deltas):
-            res = self.registration.align(scan, reference, P_opt @ geometry.exp(delta), gate, kernel)
+            scale = max(_median_displacement(geometry.exp(delta), probe), 1e-12)
+            res = self.perturbation_registration.align(
+                moved, reference, P_opt @ geometry.exp(delta), gate, kernel)
             if not res.ok:
                 continue
-            T_deg = np.linalg.inv(P_opt) @ res.pose
+            T_deg = P_opt_inv @ res.pose
             twists[i] = geometry.log(T_deg)
-            ratios[i] = _median_displacement(T_deg, probe) / max(
-                _median_displacement(geometry.exp(delta), probe), 1e-12
-            )
+            ratios[i] = _median_displacement(T_deg, probe) / scale
             valid[i] = True
         if not valid.any():
             return failed(P_opt, "every perturbed re-registration failed")
@@ -207,5 +241,6 @@ class LiliDetector:
                 "perturbation_m": d,
                 "perturbation_rad": d / L,
                 "valid_runs": int(valid.sum()),
+                "perturbation_points": len(moved),
             },
         )
