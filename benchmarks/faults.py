@@ -299,7 +299,13 @@ def load_results() -> dict:
     return {}
 
 
-def save_results(data: dict) -> None:
+def save_results(data: dict, keys: tuple[str, ...] | None = None) -> None:
+    """Write the JSON and the report; with ``keys``, only those sections of ``data`` replace
+    the stored ones (the file is re-read, so runs of the other parts are kept)."""
+    if keys is not None:
+        stored = load_results()
+        stored.update({k: data[k] for k in keys if k in data})
+        data = stored
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "robustness.json").write_text(json.dumps(data, indent=1, default=float) + "\n")
     (RESULTS / "robustness.md").write_text(render(data))
@@ -464,18 +470,18 @@ def main(argv=None) -> int:
         print(json.dumps(result, default=float))
         return 0
 
-    data = load_results()
+    data: dict = {}
     if not args.no_faults:
         data["faults"] = fault_runs(args)
-        save_results(data)
+        save_results(data, ("faults",))
     if args.play_rates:
         data["play_rates"] = play_rates(args)
-        save_results(data)
+        save_results(data, ("play_rates",))
     if args.bad_input_tests:
         data["bad_input_tests"] = bad_input_tests(args)
     if args.note is not None:
         data["notes"] = args.note
-    save_results(data)
+    save_results(data, tuple(data))
     print(f"wrote {RESULTS / 'robustness.md'}")
     return 0
 

@@ -1,0 +1,145 @@
+"""Long run memory (issue #6): the odometry over the whole of Trial 2 (430 m) with RSS sampled.
+
+RSS is read from ``/proc/self/statm`` every ``--every`` processed scans (and the local map
+size beside it); reported: the peak RSS (``getrusage``), and the linear trend of the second
+half in MB per 100 scans (local map pruning and the bounded fusion window should make it
+flat). Adds the ``long_run`` section to ``benchmarks/results/robustness.{json,md}`` and writes
+``benchmarks/results/long_run_memory.png``.
+
+    python benchmarks/long_run.py                          # method none, 32x256 (~10 min)
+    python benchmarks/long_run.py --method lili --resolution 128x1024
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import resource
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from faults import RESULTS, save_results  # noqa: E402
+
+PAGE_MB = os.sysconf("SC_PAGE_SIZE") / 2 ** 20
+
+
+def rss_mb() -> float:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * PAGE_MB
+
+
+def second_half_trend(scans: np.ndarray, rss: np.ndarray) -> tuple[float, int]:
+    """Slope [MB per 100 scans] of a least-squares line through the second half."""
+    start = int(scans[-1] // 2)
+    sel = scans >= start
+    if sel.sum() < 3:
+        return float("nan"), start
+    slope = np.polyfit(scans[sel], rss[sel], 1)[0]
+    return float(100.0 * slope), start
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--trial", type=int, default=2)
+    ap.add_argument("--resolution", default="32x256", help="e.g. 128x1024 for the full sensor")
+    ap.add_argument("--method", default="none", choices=("lili", "zhang", "hessian", "none"))
+    ap.add_argument("--every", type=int, default=20, help="sample RSS every N scans")
+    ap.add_argument("--max-scans", type=int, default=0, help="stop after N scans (0 = all)")
+    ap.add_argument("--no-progress", action="store_true")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.ERROR)
+
+    from lili_odom.bagio.reader import BagReader
+    from lili_odom.config import load_config
+    from lili_odom.evaluation.faults import run_stream
+    from lili_odom.sim.generator import ensure_trial_bag
+
+    bag = ensure_trial_bag(args.trial, resolution=args.resolution, seed=0,
+                           progress=not args.no_progress)
+    cfg = load_config(None)
+    cfg.pipeline.method = args.method
+    cfg.validate()
+    topics = [cfg.lidar_topic, cfg.imu_topic, cfg.wheel_topic, cfg.ground_truth_topic,
+              "/tf_static"]
+    samples: list[tuple[int, float, float, int]] = []  # scan, wall, rss, map points
+    t0 = time.perf_counter()
+    count = [0]
+
+    class Stop(Exception):
+        pass
+
+    def on_output(out, pipeline) -> None:
+        count[0] += 1
+        n = count[0]
+        if n == 1 or n % args.every == 0:
+            samples.append((n, time.perf_counter() - t0, rss_mb(),
+                            int(len(pipeline.local_map_points()))))
+            if not args.no_progress and n % (args.every * 25) == 0:
+                print(f"{n} scans, RSS {samples[-1][2]:.0f} MB, map {samples[-1][3]} points",
+                      flush=True)
+
+    def limited(items):
+        for item in items:
+            if args.max_scans and count[0] >= args.max_scans:
+                return
+            yield item
+
+    with BagReader(bag, topics=topics) as reader:
+        run = run_stream(limited(reader), cfg, on_output=on_output)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    arr = np.array(samples, dtype=float)
+    scans, rss, points = arr[:, 0], arr[:, 2], arr[:, 3]
+    trend, half = second_half_trend(scans, rss)
+    m = run.metrics()
+    result = {
+        "bag": f"Trial {args.trial} ({args.resolution})", "method": args.method,
+        "scans": len(run.estimates), "every": args.every,
+        "wall_time_s": run.wall_time_s, "peak_rss_mb": peak,
+        "max_sampled_rss_mb": float(rss.max()), "first_rss_mb": float(rss[0]),
+        "trend_mb_per_100_scans": trend, "second_half_from": half,
+        "map_points_end": int(points[-1]), "map_points_max": int(points.max()),
+        "ate_rmse_m": m.ate_rmse_m if m else None,
+        "path_length_m": m.path_length_m if m else None,
+        "accounting": run.accounting(),
+        "samples": [[int(s), round(w, 2), round(r, 2), int(p)] for s, w, r, p in samples],
+    }
+    print(f"peak RSS {peak:.0f} MB, second-half trend {trend:+.2f} MB/100 scans, "
+          f"{len(run.estimates)} scans in {run.wall_time_s:.0f} s")
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4))
+    ax.plot(scans, rss, color="tab:blue", label="RSS")
+    sel = scans >= half
+    if sel.sum() >= 3:
+        k, b = np.polyfit(scans[sel], rss[sel], 1)
+        ax.plot(scans[sel], k * scans[sel] + b, "k--",
+                label=f"second-half trend {100 * k:+.2f} MB/100 scans")
+    ax.axhline(peak, color="tab:red", lw=0.8, ls=":", label=f"peak RSS {peak:.0f} MB")
+    ax.set_xlabel("scans processed")
+    ax.set_ylabel("RSS [MB]")
+    ax2 = ax.twinx()
+    ax2.plot(scans, points / 1e3, color="tab:green", alpha=0.6, label="local map")
+    ax2.set_ylabel("local map points [thousand]", color="tab:green")
+    lines = ax.get_legend_handles_labels()
+    lines2 = ax2.get_legend_handles_labels()
+    ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], loc="lower right", fontsize=8)
+    ax.set_title(f"{result['bag']}, method {args.method}: memory along the run")
+    fig.tight_layout()
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    fig.savefig(RESULTS / "long_run_memory.png", dpi=110)
+
+    save_results({"long_run": result}, ("long_run",))
+    print(f"wrote {RESULTS / 'robustness.md'} and {RESULTS / 'long_run_memory.png'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
