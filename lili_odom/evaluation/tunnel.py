@@ -171,7 +171,8 @@ def _report(ev: TunnelEvaluation, bags: dict, summaries: dict) -> dict:
                 "scans_per_second": s["scans_per_second"],
                 "detector_ms": 1e3 * s["timings_mean_s"].get("detector", 0.0),
             }
-            target = TARGETS.get(trial, {}) if method == "lili" else {}
+            whole = not ev.start and ev.duration is None  # targets refer to whole trials
+            target = TARGETS.get(trial, {}) if method == "lili" and whole else {}
             row["targets"] = {k: {"target": v, "met": row[k] is not None and row[k] <= v}
                               for k, v in target.items()}
             rows.append(row)
@@ -221,7 +222,8 @@ def _markdown(report: dict) -> str:
             f"{_fmt(r['final_error_m'])} | {r['verdict']} | "
             f"{100 * r['degenerate_fraction']:.0f} % | {r['mean_dimension']:.2f} | "
             f"{r['scans_per_second']:.1f} | {r['detector_ms']:.0f} |")
-    lines += ["", "## Targets (LiLi)", ""]
+    if any(r["targets"] for r in report["rows"]):
+        lines += ["", "## Targets (LiLi)", ""]
     for r in report["rows"]:
         for k, t in r["targets"].items():
             lines.append(f"- Trial {r['trial']} {k.replace('_rmse_m', '').upper()} <= "
