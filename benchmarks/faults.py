@@ -148,18 +148,20 @@ def fault_runs(args) -> dict:
     bag_arg = os.path.relpath(bag, ROOT)  # no machine paths in the results
     jobs = [{"case": c, "method": m, "faults": spec, "seed": args.seed, "bag": bag_arg,
              "window": window} for m in args.methods for c, spec in cases.items()]
-    results = []
+    results: list = []
+    out = {"bag": label, "seed": args.seed,
+           "cases": {k: FaultSpecText(v) for k, v in cases.items()}, "runs": results}
     for i, job in enumerate(jobs, 1):
         r = run_in_subprocess("fault", job, args.timeout)
         results.append(r)
+        save_results({"faults": out}, ("faults",))  # a partial report survives an interrupt
         m = r.get("metrics") or {}
         print(f"[{i}/{len(jobs)}] {job['method']:5s} {job['case']:18s} {r['status']}: "
               f"ATE {m.get('ate_rmse_m', float('nan')):.3f} m, "
               f"{r.get('accounting', {}).get('processed', '?')} scans, "
               f"{r.get('wall_time_s', float('nan')):.0f} s, "
               f"RSS {r.get('peak_rss_mb', float('nan')):.0f} MB", flush=True)
-    return {"bag": label, "seed": args.seed,
-            "cases": {k: FaultSpecText(v) for k, v in cases.items()}, "runs": results}
+    return out
 
 
 def FaultSpecText(kwargs: dict) -> str:
@@ -447,7 +449,7 @@ def main(argv=None) -> int:
     ap.add_argument("--bag", help="use this bag instead of a simulated piece")
     ap.add_argument("--window", action="store_true",
                     help="with --bag: only --start..--start+--duration after its first stamp")
-    ap.add_argument("--methods", nargs="+", default=["lili", "none"])
+    ap.add_argument("--methods", nargs="+", default=["none", "lili"])
     ap.add_argument("--cases", nargs="+", help="only these cases (default: all)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-faults", action="store_true", help="skip the fault runs")

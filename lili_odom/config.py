@@ -83,6 +83,14 @@ class NodeConfig:
         diagnostics_period: period of the node's diagnostics log line [s of wall time]
             (0: off).
         marker_arrow_length: length of the ``~/degeneracy`` arrows [m].
+        scan_queue_size: scans allowed to wait while one is processed; when full, the oldest
+            waiting scan is dropped (counted, logged).
+        scan_subscription_depth: history depth of the cloud subscription (sensor-data QoS),
+            so clouds arriving while the executor is busy reach the node's queue.
+        reliable_inputs: subscribe to the inputs RELIABLE instead of best effort (sensor-data
+            QoS). Only for replays from a reliable publisher (``lili-odom play``, ``ros2 bag
+            play`` of a reliable recording): a reliable subscription does not match the
+            best-effort publishers of ouster-ros and most drivers.
     """
 
     lidar_topic: str = "/ouster/points"
@@ -97,6 +105,9 @@ class NodeConfig:
     path_period: float = 1.0
     diagnostics_period: float = 10.0
     marker_arrow_length: float = 2.0
+    scan_queue_size: int = 3
+    scan_subscription_depth: int = 10
+    reliable_inputs: bool = False
     extrinsics: ExtrinsicsConfig = field(default_factory=ExtrinsicsConfig)
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
 
@@ -110,6 +121,8 @@ class NodeConfig:
         check_range("diagnostics_period", self.diagnostics_period, 0.0, 3600.0, unit="s")
         check_range("marker_arrow_length", self.marker_arrow_length, 0.0, 1000.0, lo_open=True,
                     unit="m")
+        check_range("scan_queue_size", self.scan_queue_size, 1, 100)
+        check_range("scan_subscription_depth", self.scan_subscription_depth, 1, 1000)
         self.extrinsics.validate()
         _check_ranges(self)
         self.pipeline.fusion.validate("pipeline.fusion.")

@@ -47,7 +47,9 @@ def test_node_over_dds_matches_offline_runner(tmp_path, monkeypatch):
     rclpy.init(context=ctx, domain_id=int(env["ROS_DOMAIN_ID"]))
     node = LiliOdomNode(context=ctx, provider=OdometryPipelineProvider(),
                         parameter_overrides=parameters_from_mapping(
-                            {"pipeline.method": METHOD, "diagnostics_period": 0.0}))
+                            {"pipeline.method": METHOD, "diagnostics_period": 0.0,
+                                 # play is a reliable publisher: a lossless replay
+                                 "reliable_inputs": True}))
     listener = rclpy.create_node("listener", context=ctx)
     got: list = []
     listener.create_subscription(message_class("nav_msgs/msg/Odometry"), "/lili_odom/odometry",

@@ -5,19 +5,33 @@ import threading
 
 import numpy as np
 
-from lili_odom.ros.queues import LatestSlot, SampleBuffer
+from lili_odom.ros.queues import SampleBuffer, ScanQueue
 
 
-def test_latest_slot_keeps_newest_and_counts_drops():
-    slot = LatestSlot()
+def test_scan_queue_of_one_keeps_newest_and_counts_drops():
+    slot = ScanQueue(1)
     assert slot.put(1) is False
     assert slot.put(2) is True and slot.put(3) is True
     assert slot.take(0.0) == 3 and slot.dropped == 2
     assert slot.take(0.01) is None
 
 
-def test_latest_slot_slow_consumer_processes_newest():
-    slot = LatestSlot()
+def test_scan_queue_absorbs_a_burst_then_drops_the_oldest_in_order():
+    q = ScanQueue(3)
+    assert [q.put(i) for i in range(3)] == [False, False, False] and len(q) == 3
+    assert q.put(3) is True and q.dropped == 1  # 0 pushed out
+    assert [q.take(0.0) for _ in range(4)] == [1, 2, 3, None]
+
+
+def test_scan_queue_rejects_a_size_below_one():
+    import pytest
+
+    with pytest.raises(ValueError, match="maxlen"):
+        ScanQueue(0)
+
+
+def test_scan_queue_slow_consumer_processes_newest():
+    slot = ScanQueue(1)
     done = []
 
     def consumer():

@@ -204,5 +204,20 @@ def test_committed_ci_bag_is_complete_and_reproducible(tmp_path):
     fresh = simulate_bag(req, tmp_path / "fresh", progress=False)
     lo, hi = EPOCH_NS, EPOCH_NS + 300_000_000
     committed, regenerated = _messages(path, lo, hi), _messages(fresh.path, lo, hi)
-    assert len(committed) == 4 + 31 + 16 + 31
-    assert committed == regenerated, "simulator changed: regenerate bags/ with the command in bags/README.md"
+    assert len(committed) == 4 + 31 + 16 + 31 and committed.keys() == regenerated.keys()
+    hint = "simulator changed: regenerate bags/ with the command in bags/README.md"
+    for key, raw in committed.items():
+        if key[0] != "/ouster/points":  # IMU, wheels, truth: plain arithmetic, bit-exact
+            assert raw == regenerated[key], (key, hint)
+            continue
+        # Clouds: Embree's ray hits differ in the last float bits between CPUs (SIMD width),
+        # which can flip a range across a millimetre; anything else is a simulator change.
+        a = decode_cloud(TS.deserialize_cdr(raw, TOPICS[key[0]]))
+        b = decode_cloud(TS.deserialize_cdr(regenerated[key], TOPICS[key[0]]))
+        xyz_a = np.stack([a[c] for c in "xyz"], -1)
+        xyz_b = np.stack([b[c] for c in "xyz"], -1)
+        assert np.array_equal(np.isnan(xyz_a), np.isnan(xyz_b)), (key, hint)
+        assert np.allclose(xyz_a, xyz_b, atol=2e-3, equal_nan=True), (key, hint)
+        assert np.array_equal(a["t"], b["t"]) and np.array_equal(a["ring"], b["ring"]), (key, hint)
+        assert np.abs(a["range"].astype(np.int64) - b["range"]).max() <= 2, (key, hint)
+        assert np.mean(a["intensity"] != b["intensity"]) < 0.01, (key, hint)

@@ -129,9 +129,14 @@ class OdometryPipeline:
         self._warn = ThrottledWarnings(log)
 
     def _skip(self, counter: str, message: str, *args) -> None:
-        """Count a skipped scan under ``counter`` and say why (throttled per counter)."""
+        """Count a skipped scan under ``counter`` and say why.
+
+        Throttled per counter *and* message, so a burst of one kind of bad scan cannot hide
+        the first occurrence of another cause counted under the same name.
+        """
         self.counters[counter] += 1
-        self._warn.warning(counter, "scan skipped (%s): " + message, counter, *args)
+        self._warn.warning(f"{counter}:{message}", "scan skipped (%s): " + message, counter,
+                           *args)
 
     # ------------------------------------------------------------------ set-up and inputs
     def _new_estimator(self) -> None:
@@ -193,8 +198,11 @@ class OdometryPipeline:
     # ------------------------------------------------------------------ per scan
     def _sweep_times(self, scan: Scan) -> tuple[np.ndarray, float, float]:
         times = scan.times
-        if times is None or len(times) != len(scan.points) or not np.all(np.isfinite(times)):
-            # no per-point time: the sweep ends sweep_duration after its stamp; no deskew
+        if (times is None or len(times) != len(scan.points) or not np.all(np.isfinite(times))
+                or not np.ptp(times) > 0):
+            # no usable per-point time (absent, non-finite, or all equal: a driver that fills
+            # the field with a constant): the sweep ends sweep_duration after its stamp, as for
+            # a cloud without times, so both kinds of cloud share one timeline; no deskew
             t_end = scan.stamp + self.config.sweep_duration
             return np.zeros(len(scan.points)), t_end, t_end
         return times, scan.stamp + float(times.min()), scan.stamp + float(times.max())

@@ -3,7 +3,9 @@
 Run: ``lili_odom_node --ros-args --params-file config/lili_odom.yaml [-p use_sim_time:=true]``
 (or ``ros2 run lili_odom lili_odom_node ...`` under colcon).
 
-Inputs (sensor-data QoS, best effort; topics are parameters):
+Inputs (sensor-data QoS, best effort, so any publisher matches; ``reliable_inputs: true``
+subscribes RELIABLE instead, for lossless replays from a reliable publisher such as
+``lili-odom play``; topics are parameters):
 ``lidar_topic`` (``/ouster/points``, PointCloud2), ``imu_topic`` (``/ouster/imu``, Imu),
 ``wheel_topic`` (``/platform/odom``, Odometry), and ``/tf_static`` when
 ``extrinsics.use_tf_static`` is true and ``tf2_msgs`` is importable: when it links
@@ -27,10 +29,13 @@ processed with exactly the IMU/wheel data the runner would use: it waits until t
 covering its sweep end have arrived (at most ``pipeline.sensor_wait_s`` of stamp time, or the
 same in wall time when the other inputs fall silent).
 
-Scan-drop policy: at most ONE scan waits while another is processed. A scan arriving while one
-is already waiting replaces it; the older waiting scan is dropped, counted (``scans_dropped``)
-and logged (throttled to once per 5 s). Latency therefore stays below about two scan periods
-and the node always works on the newest data.
+Scan-drop policy: the cloud subscription keeps ``scan_subscription_depth`` samples, so clouds
+arriving while the executor is busy still reach the callback, which only queues them. At most
+``scan_queue_size`` scans wait while another is processed (default 3, 0.3 s at 10 Hz: a short
+hiccup of the worker loses nothing). When the queue is full, a new scan pushes out the OLDEST
+waiting one, which is dropped, counted (``scans_dropped``) and logged (throttled to once per
+5 s). Latency therefore stays below about ``scan_queue_size + 1`` scan periods and, when the
+pipeline is persistently slower than the LiDAR, the node keeps working on recent data.
 
 Time: all stamps come from the messages' headers; ``use_sim_time`` (standard parameter) only
 affects the node clock. When a scan stamp goes back by more than 1 s (a bag restarted), the
@@ -65,7 +70,7 @@ from lili_odom.pipeline.feeder import MessageFeeder
 from lili_odom.pipeline.types import OdometryOutput
 from lili_odom.ros.factory import MessageTypeError, RclpyFactory, message_class
 from lili_odom.ros.provider import OdometryPipelineProvider, PipelineLike, PipelineProvider
-from lili_odom.ros.queues import LatestSlot, SampleBuffer
+from lili_odom.ros.queues import SampleBuffer, ScanQueue
 
 __all__ = ["LiliOdomNode", "NODE_PARAMETERS", "main", "parameters_from_mapping"]
 
@@ -84,12 +89,17 @@ NODE_PARAMETERS: dict[str, Any] = {
     "path_period": 1.0,
     "diagnostics_period": 10.0,
     "marker_arrow_length": 2.0,
+    "scan_queue_size": 3,
+    "scan_subscription_depth": 10,
+    "reliable_inputs": False,
 }
 
 
-def _sensor_qos(depth: int) -> QoSProfile:
+def _sensor_qos(depth: int, reliable: bool = False) -> QoSProfile:
+    """Sensor-data QoS (best effort, volatile), or RELIABLE for lossless replays."""
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                      reliability=ReliabilityPolicy.BEST_EFFORT,
+                      reliability=(ReliabilityPolicy.RELIABLE if reliable
+                                   else ReliabilityPolicy.BEST_EFFORT),
                       durability=DurabilityPolicy.VOLATILE)
 
 
@@ -139,7 +149,7 @@ class LiliOdomNode(Node):
             "resets": 0,
         }
         self._processing_time = 0.0
-        self._scans = LatestSlot()
+        self._scans = ScanQueue(int(self.p["scan_queue_size"]))
         self._inputs = SampleBuffer(maxlen=30000)  # (topic, msg): IMU, wheel, /tf_static
         self._pending_since: float | None = None
         self._path: list[tuple[float, np.ndarray]] = []
@@ -169,12 +179,14 @@ class LiliOdomNode(Node):
             else:
                 self.pub_tf = self.create_publisher(tf_cls, "/tf", _reliable_qos(100))
 
+        reliable = bool(self.p["reliable_inputs"])
         self.create_subscription(message_class("sensor_msgs/msg/PointCloud2"),
-                                 self.p["lidar_topic"], self._on_scan, _sensor_qos(2))
+                                 self.p["lidar_topic"], self._on_scan,
+                                 _sensor_qos(int(self.p["scan_subscription_depth"]), reliable))
         self.create_subscription(message_class("sensor_msgs/msg/Imu"), self.p["imu_topic"],
-                                 self._on_imu, _sensor_qos(200))
+                                 self._on_imu, _sensor_qos(200, reliable))
         self.create_subscription(message_class("nav_msgs/msg/Odometry"), self.p["wheel_topic"],
-                                 self._on_wheel, _sensor_qos(100))
+                                 self._on_wheel, _sensor_qos(100, reliable))
         if self.p["extrinsics.use_tf_static"]:
             if tf_cls is None:
                 self.get_logger().info("tf2_msgs is not installed: extrinsics come from the "
@@ -223,7 +235,7 @@ class LiliOdomNode(Node):
             self.counters["scans_dropped"] = self._scans.dropped
             self.get_logger().warn(
                 f"processing slower than the LiDAR: dropped {self._scans.dropped} older "
-                "scan(s) so far (only the newest pending scan is kept)",
+                f"scan(s) so far (at most {self._scans.maxlen} scans wait; the oldest goes)",
                 throttle_duration_sec=5.0)
 
     def _on_imu(self, msg: Any) -> None:

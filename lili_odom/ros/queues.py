@@ -1,10 +1,12 @@
 """Thread-safe hand-over between the node's ROS callbacks and its processing thread.
 
 Policy (documented in the node): the LiDAR callback never processes; it puts the scan in a
-:class:`LatestSlot` that holds at most ONE pending scan. A scan arriving while another is still
-pending replaces it: the older pending scan is DROPPED and counted (``dropped``). So when
-processing is slower than the LiDAR, the node always works on the newest data and its latency
-stays bounded at about two scan periods, instead of a queue growing without bound.
+:class:`ScanQueue` that holds at most ``maxlen`` pending scans (the node's
+``scan_queue_size``). The queue absorbs a short hiccup of the worker (a slow scan, a garbage
+collection, a busy core) without losing anything; when it is full, a new scan pushes out the
+OLDEST pending one, which is DROPPED and counted (``dropped``). So when processing is
+persistently slower than the LiDAR, the node keeps working on recent data and its latency stays
+bounded at about ``maxlen + 1`` scan periods, instead of a queue growing without bound.
 
 IMU and wheel callbacks append to a :class:`SampleBuffer` (cheap; bounded so a stalled worker
 cannot grow memory without limit; overflow is counted), drained by the worker before each scan.
@@ -15,39 +17,50 @@ import threading
 from collections import deque
 from typing import Any, Generic, TypeVar
 
-__all__ = ["LatestSlot", "SampleBuffer"]
+__all__ = ["ScanQueue", "SampleBuffer"]
 
 T = TypeVar("T")
 
 
-class LatestSlot(Generic[T]):
-    """Single-item mailbox keeping only the newest item."""
+class ScanQueue(Generic[T]):
+    """Bounded FIFO mailbox: when full, a new item pushes out (drops) the oldest.
 
-    def __init__(self) -> None:
+    Args:
+        maxlen: items kept at most (1: only the newest pending item).
+    """
+
+    def __init__(self, maxlen: int = 1) -> None:
+        if int(maxlen) < 1:
+            raise ValueError(f"maxlen must be >= 1, got {maxlen}")
+        self.maxlen = int(maxlen)
         self._cond = threading.Condition()
-        self._item: T | None = None
+        self._items: deque[T] = deque()
         self._closed = False
         self.put_count = 0
         self.dropped = 0
 
     def put(self, item: T) -> bool:
-        """Store ``item``; returns True when an older pending item was dropped."""
+        """Append ``item``; returns True when the oldest pending item was dropped for it."""
         with self._cond:
             self.put_count += 1
-            replaced = self._item is not None
-            if replaced:
+            dropped = len(self._items) >= self.maxlen
+            if dropped:
+                self._items.popleft()
                 self.dropped += 1
-            self._item = item
+            self._items.append(item)
             self._cond.notify()
-            return replaced
+            return dropped
 
     def take(self, timeout: float | None = None) -> T | None:
-        """Wait up to ``timeout`` s for an item and remove it; None on timeout or close."""
+        """Wait up to ``timeout`` s for an item and remove the oldest; None on timeout or close."""
         with self._cond:
-            if self._item is None and not self._closed:
+            if not self._items and not self._closed:
                 self._cond.wait(timeout)
-            item, self._item = self._item, None
-            return item
+            return self._items.popleft() if self._items else None
+
+    def __len__(self) -> int:
+        with self._cond:
+            return len(self._items)
 
     def close(self) -> None:
         """Wake every waiter; later ``take`` calls return immediately."""
