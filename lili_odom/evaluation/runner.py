@@ -40,6 +40,10 @@ class OfflineRun:
     estimates: list[tuple[float, np.ndarray]] = field(default_factory=list)
     truth: list[tuple[float, np.ndarray]] = field(default_factory=list)
     dimensions: list[int] = field(default_factory=list)
+    #: per scan: the detection's (k, 6) basis in the sensor body frame, scaled (empty: none)
+    bases_scaled: list[np.ndarray] = field(default_factory=list)
+    #: per scan: True when the detection was carried over from an earlier scan
+    reused: list[bool] = field(default_factory=list)
     timings: dict[str, list[float]] = field(default_factory=dict)
     summary: dict = field(default_factory=dict)
 
@@ -102,6 +106,9 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
             dim = out.degeneracy.dimension if out.degeneracy is not None else 0
             run.estimates.append((out.stamp, out.pose))
             run.dimensions.append(dim)
+            det = out.degeneracy
+            run.bases_scaled.append(det.basis_scaled if det is not None else np.zeros((0, 6)))
+            run.reused.append(bool(det is not None and det.details.get("reused")))
             for k, v in out.timings.items():
                 run.timings.setdefault(k, []).append(v)
             rows.append([out.stamp, dim, *out.pose[:3, 3],

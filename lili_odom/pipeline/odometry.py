@@ -30,9 +30,10 @@ from lili_odom import geometry
 from lili_odom.degeneracy.hessian import HessianConfig, HessianDetector, ZhangConfig, ZhangDetector
 from lili_odom.degeneracy.lili import LiliConfig, LiliDetector
 from lili_odom.degeneracy.result import DegeneracyResult
-from lili_odom.errors import ThrottledWarnings
+from lili_odom.errors import ThrottledWarnings, check_range
 from lili_odom.fusion.config import FusionConfig
 from lili_odom.fusion.estimator import FusionEstimator
+from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionScheduleConfig
 from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig
 from lili_odom.pipeline.types import ImuSample, OdometryOutput, Scan, WheelSample
 
@@ -59,6 +60,8 @@ class PipelineConfig:
             :mod:`lili_odom.pipeline.feeder`).
         max_pending_scans: scans allowed to wait for IMU/wheel data at once; beyond, the
             oldest is processed with what there is.
+        detection_schedule: when a recent detection is carried over instead of running the
+            detector again (:mod:`lili_odom.pipeline.detection_schedule`).
         scan_matcher / fusion / lili / zhang / hessian: the stages' own configurations.
     """
 
@@ -70,6 +73,7 @@ class PipelineConfig:
     detection_points: int = 4000
     sensor_wait_s: float = 0.3
     max_pending_scans: int = 3
+    detection_schedule: DetectionScheduleConfig = field(default_factory=DetectionScheduleConfig)
     scan_matcher: ScanMatcherConfig = field(default_factory=ScanMatcherConfig)
     fusion: FusionConfig = field(default_factory=FusionConfig)
     lili: LiliConfig = field(default_factory=LiliConfig)
@@ -91,6 +95,12 @@ class PipelineConfig:
             raise ValueError(f"sensor_wait_s must be in [0, 10] s, got {self.sensor_wait_s}")
         if not 1 <= self.max_pending_scans <= 100:
             raise ValueError(f"max_pending_scans must be in [1, 100], got {self.max_pending_scans}")
+        ds = self.detection_schedule
+        check_range("detection_schedule.max_reuse", ds.max_reuse, 0, 1000)
+        check_range("detection_schedule.reuse_distance_m", ds.reuse_distance_m, 0.0, 100.0,
+                    unit="m")
+        check_range("detection_schedule.reuse_angle_deg", ds.reuse_angle_deg, 0.0, 180.0,
+                    unit="deg")
         self.scan_matcher.validate()
         self.lili.validate()
 
@@ -122,6 +132,7 @@ class OdometryPipeline:
         self.config.validate()
         self.counters: Counter[str] = Counter()
         self._detector = make_detector(self.config)
+        self._schedule = DetectionSchedule(self.config.detection_schedule)
         self._matcher = ScanMatcher(self.config.scan_matcher)
         self._new_estimator()
         self._last_stamp: float | None = None
@@ -167,6 +178,7 @@ class OdometryPipeline:
         """
         old = self.estimator
         self._matcher.reset()
+        self._schedule.reset()
         self._new_estimator()
         if keep_from is not None and self._last_stamp is not None:
             t1 = self._last_stamp - self.config.max_backward_jump_s
@@ -245,6 +257,7 @@ class OdometryPipeline:
                                    "re-initialised at the registered pose", gap, t_ref)
                 warnings.append(f"{gap:.2f} s gap: re-initialised at the registered pose")
                 old = self.estimator
+                self._schedule.reset()
                 self._new_estimator()  # keeps the map; the state restarts at this scan
                 self.estimator.imu, self.estimator.wheels = old.imu, old.wheels
                 reinit_pose = self._last_output.pose if self._last_output is not None else None
@@ -284,13 +297,21 @@ class OdometryPipeline:
 
         degeneracy = None
         t0 = time.perf_counter()
+        if self._detector is not None and not reg.ok:
+            self._schedule.reset()
         if self._detector is not None and reg.ok and not first:
-            det_points = source
-            n = self.config.detection_points
-            if n and len(det_points) > n:
-                det_points = det_points[:: int(np.ceil(len(det_points) / n))]
-            degeneracy = self._detector.detect(self._matcher.reference, det_points, guess,
-                                               optimized_pose=reg.pose)
+            degeneracy = self._schedule.reusable(reg.pose)
+            if degeneracy is not None:
+                self.counters["detections_reused"] += 1
+            else:
+                det_points = source
+                n = self.config.detection_points
+                if n and len(det_points) > n:
+                    det_points = det_points[:: int(np.ceil(len(det_points) / n))]
+                degeneracy = self._detector.detect(self._matcher.reference, det_points, guess,
+                                                   optimized_pose=reg.pose)
+                self._schedule.record(degeneracy)
+                self.counters["detections"] += 1
             if not degeneracy.ok:
                 self.counters["detector_failures"] += 1
                 warnings.append(f"detector: {degeneracy.reason}")

@@ -1,0 +1,214 @@
+"""What the detector's cost savings do to the detected subspace and to the odometry.
+
+    python benchmarks/detection_cost.py                  # LiLi, two 40 s pieces of Trial 1
+    python benchmarks/detection_cost.py --variant reuse4 detection_schedule.max_reuse=4
+
+For each piece of the simulated tunnel Trial 1 (default 32x256: the cluttered entrance from 0 s
+and the featureless stretch from 70 s, 40 s each) the odometry runs once with the *reference*
+detector settings (the paper's: every scan, every scan point up to ``detection_points``, 100
+ICP iterations per perturbed re-registration) and once per *variant* (pipeline parameters
+overridden, dotted names as in ``config/lili_odom.yaml`` below ``pipeline``). Per run: ATE /
+RPE / final error (evo), the share of scans on which the detector ran, the mean detector time
+per scan [ms], scans/s, and against the reference, scan by scan: the share of scans with the
+same detected dimension and the largest principal angle between the two subspaces (scaled
+space, sensor body frame) where both are degenerate with equal dimension (mean, p95). The
+reference row holds, in those columns, the detector's own scan-to-scan spread. Writes
+``benchmarks/results/detection_cost.{md,json}``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from lili_odom.config import load_config  # noqa: E402
+from lili_odom.evaluation.runner import run_bag  # noqa: E402
+from lili_odom.sim.generator import ensure_trial_bag  # noqa: E402
+
+PIECES = {"entrance": 0.0, "featureless": 70.0}
+
+
+def largest_angle_deg(A: np.ndarray, B: np.ndarray) -> float:
+    """Largest principal angle [deg] between the row spaces of orthonormal A and B (same k)."""
+    s = np.linalg.svd(A @ B.T, compute_uv=False)
+    return float(np.degrees(np.arccos(np.clip(s.min(), -1.0, 1.0))))
+
+
+def compare(ref, run) -> dict:
+    """Scan-by-scan agreement of ``run``'s subspaces with ``ref``'s (matched by stamp)."""
+    ref_idx = {round(t, 6): i for i, t in enumerate(ref.stamps)}
+    same, angles, n = 0, [], 0
+    for j, t in enumerate(run.stamps):
+        i = ref_idx.get(round(t, 6))
+        if i is None:
+            continue
+        n += 1
+        A, B = ref.bases_scaled[i], run.bases_scaled[j]
+        if len(A) != len(B):
+            continue
+        same += 1
+        if len(A):
+            angles.append(largest_angle_deg(A, B))
+    a = np.asarray(angles)
+    return {"matched_scans": n, "same_dimension": same / n if n else float("nan"),
+            "angle_mean_deg": float(a.mean()) if len(a) else 0.0,
+            "angle_p95_deg": float(np.percentile(a, 95)) if len(a) else 0.0}
+
+
+def self_consistency(ref) -> dict:
+    """The reference against itself one scan later: the detector's own scan-to-scan spread,
+    the scale on which to judge a carried-over subspace."""
+    same, angles = 0, []
+    pairs = list(zip(ref.bases_scaled[:-1], ref.bases_scaled[1:]))
+    for A, B in pairs:
+        if len(A) != len(B):
+            continue
+        same += 1
+        if len(A):
+            angles.append(largest_angle_deg(A, B))
+    a = np.asarray(angles)
+    return {"matched_scans": len(pairs), "same_dimension": same / max(1, len(pairs)),
+            "angle_mean_deg": float(a.mean()) if len(a) else 0.0,
+            "angle_p95_deg": float(np.percentile(a, 95)) if len(a) else 0.0}
+
+
+#: the paper's LiLi settings, every scan
+REFERENCE = {"detection_schedule.max_reuse": 0, "lili.perturbation_points": 0,
+             "lili.perturbation_iterations": 0}
+#: variants measured by default (each overrides the reference)
+VARIANTS = {
+    "reuse2": {"detection_schedule.max_reuse": 2},
+    "points1500": {"lili.perturbation_points": 1500},
+    "iterations30": {"lili.perturbation_iterations": 30},
+    "reuse2+points1500": {"detection_schedule.max_reuse": 2, "lili.perturbation_points": 1500},
+}
+
+
+def _set(obj, dotted: str, value) -> None:
+    *path, leaf = dotted.split(".")
+    for part in path:
+        obj = getattr(obj, part)
+    if not hasattr(obj, leaf):
+        raise SystemExit(f"detection_cost: unknown parameter pipeline.{dotted}")
+    setattr(obj, leaf, type(getattr(obj, leaf))(value))
+
+
+def one_run(bag: Path, method: str, name: str, overrides: dict, work: Path, label: str):
+    config = load_config(None)
+    config.pipeline.method = method
+    for key, value in {**REFERENCE, **overrides}.items():
+        _set(config.pipeline, key, value)
+    config.validate()
+    t0 = time.perf_counter()
+    run = run_bag(bag, config, work / f"{label}_{name}", progress=False)
+    s, m = run.summary, run.summary.get("metrics") or {}
+    det = np.asarray(run.timings.get("detector", [0.0]))
+    row = {"variant": name, "overrides": overrides, "scans": s["scans_processed"],
+           "detector_share": 1.0 - float(np.mean(run.reused)) if run.reused else float("nan"),
+           "detector_ms": 1e3 * float(det.mean()), "scans_per_second": s["scans_per_second"],
+           "ate_rmse_m": m.get("ate_rmse_m"), "rpe_rmse_m": m.get("rpe_rmse_m"),
+           "rpe_segment_m": m.get("rpe_segment_m"), "final_error_m": m.get("final_error_m"),
+           "degenerate_fraction": s["degenerate_fraction"], "mean_dimension": s["mean_dimension"],
+           "wall_s": time.perf_counter() - t0}
+    print(f"{label:12s} {name:18s}: {row['scans']} scans, detector on "
+          f"{100 * row['detector_share']:.0f} %, {row['detector_ms']:.0f} ms/scan, "
+          f"{row['scans_per_second']:.1f} scans/s, ATE {row['ate_rmse_m']:.3f} m", flush=True)
+    return run, row
+
+
+def markdown(report: dict) -> str:
+    lines = [
+        "# Detector cost savings: subspace and odometry against the paper's settings",
+        "",
+        f"Generated by `python benchmarks/detection_cost.py` (method `{report['method']}`, "
+        f"tunnel Trial 1 at {report['resolution']}, {report['duration']:g} s pieces). "
+        "Reference: the paper's settings, the detector on every scan. Variants: "
+        + "; ".join(f"`{n}` = " + ", ".join(f"`{k}={v}`" for k, v in o.items())
+                    for n, o in report["variants"].items())
+        + ". Reuse carries a detection over to at most `max_reuse` following scans within "
+        f"{report['reuse_distance_m']:g} m and {report['reuse_angle_deg']:g} deg of it. "
+        "Same dim: scans whose detected dimension equals the reference's on the same scan; "
+        "angle: largest principal angle to the reference's subspace where both are degenerate "
+        "with equal dimension (scaled space). The reference's row gives, in those two columns, "
+        "the detector's own spread: each scan of the reference against the next one. "
+        "Detector time is the mean over all scans, reused ones included.",
+        "",
+        "| piece | settings | detector runs | detector [ms/scan] | scans/s | ATE [m] | RPE [m] "
+        "(segment) | final [m] | degenerate | mean dim | same dim | angle mean / p95 [deg] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for piece, rows in report["pieces"].items():
+        for r in rows:
+            c = r.get("vs_reference") or r.get("scan_to_scan")
+            tag = " (scan to scan)" if "scan_to_scan" in r else ""
+            tail = (f"{100 * c['same_dimension']:.0f} %{tag} | {c['angle_mean_deg']:.1f} / "
+                    f"{c['angle_p95_deg']:.1f} |") if c else "- | - |"
+            lines.append(
+                f"| {piece} | {r['variant']} | {100 * r['detector_share']:.0f} % | "
+                f"{r['detector_ms']:.0f} | {r['scans_per_second']:.1f} | {r['ate_rmse_m']:.3f} | "
+                f"{r['rpe_rmse_m']:.3f} ({r['rpe_segment_m']:.0f} m) | {r['final_error_m']:.3f} | "
+                f"{100 * r['degenerate_fraction']:.0f} % | {r['mean_dimension']:.2f} | " + tail)
+    lines += ["", f"Machine: {report['machine']}.", ""]
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    import platform
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--method", default="lili", choices=("lili", "zhang", "hessian"))
+    ap.add_argument("--variant", nargs="+", action="append", metavar=("NAME", "KEY=VALUE"),
+                    help="a variant (repeatable): a name and pipeline overrides; replaces the "
+                    "default variants")
+    ap.add_argument("--resolution", default="32x256")
+    ap.add_argument("--duration", type=float, default=40.0)
+    ap.add_argument("--pieces", nargs="+", default=list(PIECES), choices=list(PIECES))
+    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
+    args = ap.parse_args(argv)
+    variants = VARIANTS
+    if args.variant:
+        variants = {}
+        for name, *pairs in args.variant:
+            try:
+                variants[name] = dict(p.split("=", 1) for p in pairs)
+            except ValueError:
+                raise SystemExit(f"detection_cost: --variant {name}: overrides are KEY=VALUE")
+    logging.basicConfig(level=logging.ERROR)
+    defaults = load_config(None).pipeline.detection_schedule
+    report = {"method": args.method, "resolution": args.resolution, "duration": args.duration,
+              "reuse_distance_m": defaults.reuse_distance_m,
+              "reuse_angle_deg": defaults.reuse_angle_deg, "variants": variants,
+              "machine": f"{platform.machine()}, {__import__('os').cpu_count()} cores, "
+                         f"Python {platform.python_version()}",
+              "pieces": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        for piece in args.pieces:
+            bag = ensure_trial_bag(1, resolution=args.resolution, start=PIECES[piece],
+                                   duration=args.duration, progress=False)
+            ref, row = one_run(bag, args.method, "reference", {}, Path(tmp), piece)
+            row["scan_to_scan"] = self_consistency(ref)
+            rows = [row]
+            for name, overrides in variants.items():
+                run, row = one_run(bag, args.method, name, overrides, Path(tmp), piece)
+                row["vs_reference"] = compare(ref, run)
+                rows.append(row)
+            report["pieces"][piece] = rows
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "detection_cost.json").write_text(json.dumps(report, indent=1) + "\n")
+    (args.out / "detection_cost.md").write_text(markdown(report))
+    print(markdown(report))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,93 @@
+"""When to run the degeneracy detector, and how to carry a recent result over to a new scan.
+
+A detector run (LiLi: 12 perturbed re-registrations) costs several times the scan
+registration itself, while the degenerate subspace is a property of the *place*: consecutive
+scans 0.1 s and a few centimetres apart see the same tunnel. The schedule therefore runs the
+detector on a scan unless a recent, successful result exists, taken at most
+``max_reuse`` scans ago, less than ``reuse_distance_m`` and ``reuse_angle_deg`` away from the
+current registered pose. A reused result is *carried over* rigidly: its degenerate motions are
+fixed in the odometry frame, so its basis is moved from the old sensor body frame to the new
+one with the adjoint of the relative pose and re-orthonormalised in the scaled space.
+
+``max_reuse = 0`` runs the detector on every scan (the paper's setting). The defaults and their
+effect on the detected subspace and the odometry are measured by
+``benchmarks/detection_cost.py`` (results in ``benchmarks/results/detection_cost.md``).
+
+Frames: ``pose`` arguments are 4x4 sensor (os_lidar) poses in the odometry frame [m]; basis
+twists are ``(v, w)`` in the sensor's body frame (:mod:`lili_odom.degeneracy.result`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from lili_odom import geometry
+from lili_odom.degeneracy.result import DegeneracyResult
+
+
+@dataclass
+class DetectionScheduleConfig:
+    """Attributes:
+        max_reuse: consecutive scans that may reuse one detection (0: detect every scan).
+        reuse_distance_m: re-detect once the sensor moved this far from the detection [m].
+        reuse_angle_deg: re-detect once the sensor turned this much from the detection [deg].
+    """
+
+    max_reuse: int = 2
+    reuse_distance_m: float = 0.3
+    reuse_angle_deg: float = 5.0
+
+
+def carry_over(result: DegeneracyResult, pose: np.ndarray, age: int) -> DegeneracyResult:
+    """``result`` re-expressed at the sensor pose ``pose`` (same motions in the odometry frame).
+
+    Args:
+        result: a successful detection at ``result.pose``.
+        pose: 4x4 current sensor pose in the odometry frame.
+        age: scans since ``result`` was computed (reported in ``details["reused_age"]``).
+    """
+    T_new_old = np.linalg.inv(pose) @ result.pose
+    L = result.characteristic_length
+    basis = result.basis_scaled
+    if len(basis):
+        moved = geometry.scale_twist(geometry.unscale_twist(basis, L)
+                                     @ geometry.adjoint(T_new_old).T, L)
+        q, r = np.linalg.qr(moved.T)  # Gram-Schmidt: row order and sparse rows preserved
+        basis = (q * np.where(np.diag(r) < 0, -1.0, 1.0)).T
+    details = {**result.details, "reused": True, "reused_age": int(age)}
+    return replace(result, pose=np.asarray(pose, dtype=float), basis_scaled=basis,
+                   runtime_s=0.0, details=details)
+
+
+class DetectionSchedule:
+    """Decides per scan whether to detect or to carry the last detection over."""
+
+    def __init__(self, config: DetectionScheduleConfig | None = None) -> None:
+        self.config = config or DetectionScheduleConfig()
+        self._last: DegeneracyResult | None = None
+        self._age = 0
+
+    def reset(self) -> None:
+        """Forget the last detection (pipeline reset, re-initialisation, failed registration)."""
+        self._last = None
+        self._age = 0
+
+    def reusable(self, pose: np.ndarray) -> DegeneracyResult | None:
+        """The last detection carried over to ``pose``, or None when the detector must run."""
+        cfg, last = self.config, self._last
+        if last is None or self._age >= cfg.max_reuse:
+            return None
+        delta = np.linalg.inv(last.pose) @ pose
+        if np.linalg.norm(delta[:3, 3]) > cfg.reuse_distance_m:
+            return None
+        cos = np.clip((np.trace(delta[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)
+        if np.degrees(np.arccos(cos)) > cfg.reuse_angle_deg:
+            return None
+        self._age += 1
+        return carry_over(last, pose, self._age)
+
+    def record(self, result: DegeneracyResult) -> None:
+        """A fresh detection: reusable from the next scan on when it succeeded."""
+        self._last = result if result.ok else None
+        self._age = 0

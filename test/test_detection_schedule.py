@@ -1,0 +1,117 @@
+"""The detection schedule: when a detection is reused, and how it is carried to a new pose."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lili_odom import geometry
+from lili_odom.degeneracy.result import DegeneracyResult, failed_result
+from lili_odom.pipeline.detection_schedule import (DetectionSchedule, DetectionScheduleConfig,
+                                                   carry_over)
+from lili_odom.pipeline.odometry import OdometryPipeline, PipelineConfig
+
+L = 8.0
+
+
+def _result(pose, rows) -> DegeneracyResult:
+    return DegeneracyResult("lili", np.asarray(pose, float), np.asarray(rows, float), L)
+
+
+def _pose(x=0.0, yaw_deg=0.0) -> np.ndarray:
+    return geometry.exp(np.array([x, 0, 0, 0, 0, np.radians(yaw_deg)]))
+
+
+def _same_subspace(A, B) -> bool:
+    """Row spaces equal (orthonormal rows)."""
+    return np.allclose(A.T @ A, B.T @ B, atol=1e-9)
+
+
+def test_carry_over_keeps_the_motions_fixed_in_the_odometry_frame():
+    old = _pose(0.0, 0.0)
+    new = _pose(0.2, 20.0)
+    # degenerate: translation along world x and rotation about the world z axis through the
+    # old origin (in scaled units)
+    res = _result(old, [[1, 0, 0, 0, 0, 0], [0, 0, 0, 0, 0, 1]])
+    moved = carry_over(res, new, age=1)
+    assert moved.details["reused"] and moved.details["reused_age"] == 1
+    assert moved.runtime_s == 0.0 and np.allclose(moved.pose, new)
+    B = moved.basis_scaled
+    assert np.allclose(B @ B.T, np.eye(2), atol=1e-9)  # orthonormal in the scaled space
+    # every carried motion, mapped back to the odometry frame, lies in the old subspace
+    back = geometry.scale_twist(geometry.unscale_twist(B, L) @ geometry.adjoint(new).T, L)
+    P_old = res.basis_scaled.T @ res.basis_scaled
+    assert np.allclose(back @ P_old, back, atol=1e-9)
+    # the translation along world x seen from a body turned by 20 deg: (cos, -sin, 0), the
+    # first row still (Gram-Schmidt keeps the rows' order)
+    a = np.radians(20)
+    assert np.allclose(B[0], [np.cos(a), -np.sin(a), 0, 0, 0, 0], atol=1e-9)
+
+
+def test_carry_over_of_an_empty_basis_stays_empty():
+    moved = carry_over(_result(_pose(), np.zeros((0, 6))), _pose(0.1), age=2)
+    assert moved.dimension == 0 and moved.details["reused_age"] == 2
+
+
+@pytest.mark.parametrize("pose, reused", [
+    (_pose(0.1), True),            # close: reuse
+    (_pose(0.5), False),           # moved more than 0.3 m
+    (_pose(0.0, 10.0), False),     # turned more than 5 deg
+])
+def test_reuse_only_close_to_the_detection(pose, reused):
+    sched = DetectionSchedule(DetectionScheduleConfig(max_reuse=2, reuse_distance_m=0.3,
+                                                      reuse_angle_deg=5.0))
+    assert sched.reusable(_pose()) is None  # nothing detected yet
+    sched.record(_result(_pose(), [[1, 0, 0, 0, 0, 0]]))
+    assert (sched.reusable(pose) is not None) == reused
+
+
+def test_reuse_at_most_max_reuse_scans_then_detect_again():
+    sched = DetectionSchedule(DetectionScheduleConfig(max_reuse=2))
+    sched.record(_result(_pose(), [[1, 0, 0, 0, 0, 0]]))
+    assert [sched.reusable(_pose(0.01 * i)) is not None for i in range(1, 4)] == \
+        [True, True, False]
+    sched.record(_result(_pose(0.03), [[1, 0, 0, 0, 0, 0]]))
+    assert sched.reusable(_pose(0.04)) is not None
+
+
+def test_failed_detections_and_resets_are_never_reused():
+    sched = DetectionSchedule(DetectionScheduleConfig(max_reuse=5))
+    sched.record(failed_result("lili", _pose(), L, 0.0, "no correspondences"))
+    assert sched.reusable(_pose()) is None
+    sched.record(_result(_pose(), [[1, 0, 0, 0, 0, 0]]))
+    sched.reset()
+    assert sched.reusable(_pose()) is None
+
+
+def test_max_reuse_zero_detects_every_scan():
+    sched = DetectionSchedule(DetectionScheduleConfig(max_reuse=0))
+    sched.record(_result(_pose(), [[1, 0, 0, 0, 0, 0]]))
+    assert sched.reusable(_pose()) is None
+
+
+def test_pipeline_counts_detections_and_reuses():
+    """In a closed room at rest: one detection, then two reuses, then a detection again."""
+    rng = np.random.default_rng(0)
+    faces = []
+    for ax in range(3):
+        for s in (-1, 1):
+            p = rng.uniform(-1, 1, (1500, 3)) * [6, 5, 3]
+            p[:, ax] = s * [6, 5, 3][ax]
+            faces.append(p)
+    room = np.vstack(faces)
+    from lili_odom.pipeline.types import Scan
+
+    pipe = OdometryPipeline(PipelineConfig(method="hessian"))
+    outs = [pipe.process_scan(Scan(100.0 + 0.1 * i, room, None)) for i in range(5)]
+    assert all(o is not None for o in outs)
+    # scan 0 initialises (no detection); then detect, reuse, reuse, detect
+    assert pipe.counters["detections"] == 2 and pipe.counters["detections_reused"] == 2
+    assert [bool(o.degeneracy.details.get("reused")) for o in outs[1:]] == \
+        [False, True, True, False]
+
+
+def test_invalid_schedule_parameters_are_named():
+    cfg = PipelineConfig()
+    cfg.detection_schedule.reuse_distance_m = -1.0
+    with pytest.raises(ValueError, match="detection_schedule.reuse_distance_m"):
+        OdometryPipeline(cfg)
