@@ -5,7 +5,8 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test install benchmark-shapes benchmark-tunnel benchmark-speed clean
+.PHONY: demo test install benchmark-shapes benchmark-tunnel benchmark-speed \
+	benchmark-detection-cost benchmark-robustness clean
 
 $(STAMP): setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -27,11 +28,20 @@ demo: $(STAMP)
 benchmark-shapes: $(STAMP)
 	$(PY) benchmarks/shapes.py
 
+# Table II: Trials 1 and 2, every method, OS1 at 64 x 512 (bags ~6 GB in data/sim, ~1.5 h on
+# 2 cores); `python benchmarks/tunnel.py --resolution 128x1024` for the full sensor (~22 GB).
 benchmark-tunnel: $(STAMP)
-	$(PY) benchmarks/tunnel.py
+	$(PY) benchmarks/tunnel.py --resolution 64x512 --jobs 2
 
 benchmark-speed: $(STAMP)
 	$(PY) benchmarks/speed.py
+
+benchmark-detection-cost: $(STAMP)
+	$(PY) benchmarks/detection_cost.py
+
+benchmark-robustness: $(STAMP)
+	$(PY) benchmarks/faults.py --resolution 32x256 --play-rates
+	$(PY) benchmarks/long_run.py
 
 clean:
 	rm -rf $(VENV) build install log *.egg-info

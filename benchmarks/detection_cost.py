@@ -3,7 +3,7 @@
     python benchmarks/detection_cost.py                  # LiLi, two 40 s pieces of Trial 1
     python benchmarks/detection_cost.py --variant reuse4 detection_schedule.max_reuse=4
 
-For each piece of the simulated tunnel Trial 1 (default 32x256: the cluttered entrance from 0 s
+For each piece of the simulated tunnel Trial 1 (default 64x512: the cluttered entrance from 0 s
 and the featureless stretch from 70 s, 40 s each) the odometry runs once with the *reference*
 detector settings (the paper's: every scan, every scan point up to ``detection_points``, 100
 ICP iterations per perturbed re-registration) and once per *variant* (pipeline parameters
@@ -44,42 +44,29 @@ def largest_angle_deg(A: np.ndarray, B: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(s.min(), -1.0, 1.0))))
 
 
+def agreement(pairs: list[tuple[np.ndarray, np.ndarray]]) -> dict:
+    """Share of basis pairs with equal dimension, and the largest principal angles [deg]
+    (mean, p95) of the pairs that are degenerate with equal dimension."""
+    same = [(A, B) for A, B in pairs if len(A) == len(B)]
+    a = np.asarray([largest_angle_deg(A, B) for A, B in same if len(A)])
+    return {"matched_scans": len(pairs),
+            "same_dimension": len(same) / len(pairs) if pairs else float("nan"),
+            "angle_mean_deg": float(a.mean()) if len(a) else 0.0,
+            "angle_p95_deg": float(np.percentile(a, 95)) if len(a) else 0.0}
+
+
 def compare(ref, run) -> dict:
     """Scan-by-scan agreement of ``run``'s subspaces with ``ref``'s (matched by stamp)."""
     ref_idx = {round(t, 6): i for i, t in enumerate(ref.stamps)}
-    same, angles, n = 0, [], 0
-    for j, t in enumerate(run.stamps):
-        i = ref_idx.get(round(t, 6))
-        if i is None:
-            continue
-        n += 1
-        A, B = ref.bases_scaled[i], run.bases_scaled[j]
-        if len(A) != len(B):
-            continue
-        same += 1
-        if len(A):
-            angles.append(largest_angle_deg(A, B))
-    a = np.asarray(angles)
-    return {"matched_scans": n, "same_dimension": same / n if n else float("nan"),
-            "angle_mean_deg": float(a.mean()) if len(a) else 0.0,
-            "angle_p95_deg": float(np.percentile(a, 95)) if len(a) else 0.0}
+    pairs = [(ref.bases_scaled[ref_idx[round(t, 6)]], run.bases_scaled[j])
+             for j, t in enumerate(run.stamps) if round(t, 6) in ref_idx]
+    return agreement(pairs)
 
 
 def self_consistency(ref) -> dict:
     """The reference against itself one scan later: the detector's own scan-to-scan spread,
     the scale on which to judge a carried-over subspace."""
-    same, angles = 0, []
-    pairs = list(zip(ref.bases_scaled[:-1], ref.bases_scaled[1:]))
-    for A, B in pairs:
-        if len(A) != len(B):
-            continue
-        same += 1
-        if len(A):
-            angles.append(largest_angle_deg(A, B))
-    a = np.asarray(angles)
-    return {"matched_scans": len(pairs), "same_dimension": same / max(1, len(pairs)),
-            "angle_mean_deg": float(a.mean()) if len(a) else 0.0,
-            "angle_p95_deg": float(np.percentile(a, 95)) if len(a) else 0.0}
+    return agreement(list(zip(ref.bases_scaled[:-1], ref.bases_scaled[1:])))
 
 
 #: the paper's LiLi settings, every scan
@@ -100,7 +87,12 @@ def _set(obj, dotted: str, value) -> None:
         obj = getattr(obj, part)
     if not hasattr(obj, leaf):
         raise SystemExit(f"detection_cost: unknown parameter pipeline.{dotted}")
-    setattr(obj, leaf, type(getattr(obj, leaf))(value))
+    current = getattr(obj, leaf)
+    if isinstance(current, bool) and isinstance(value, str):
+        if value.lower() not in ("true", "false"):
+            raise SystemExit(f"detection_cost: pipeline.{dotted} must be true or false")
+        value = value.lower() == "true"
+    setattr(obj, leaf, type(current)(value))
 
 
 def one_run(bag: Path, method: str, name: str, overrides: dict, work: Path, label: str):
@@ -170,7 +162,7 @@ def main(argv=None) -> int:
     ap.add_argument("--variant", nargs="+", action="append", metavar=("NAME", "KEY=VALUE"),
                     help="a variant (repeatable): a name and pipeline overrides; replaces the "
                     "default variants")
-    ap.add_argument("--resolution", default="32x256")
+    ap.add_argument("--resolution", default="64x512")
     ap.add_argument("--duration", type=float, default=40.0)
     ap.add_argument("--pieces", nargs="+", default=list(PIECES), choices=list(PIECES))
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")

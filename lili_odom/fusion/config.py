@@ -8,6 +8,7 @@ import numpy as np
 from lili_odom.errors import check_range
 from lili_odom.fusion.imu import ImuNoiseConfig
 from lili_odom.fusion.wheel import WheelNoiseConfig
+from lili_odom.fusion.wheel_scale import WheelScaleConfig
 
 __all__ = ["LidarNoiseConfig", "FusionConfig", "ImuNoiseConfig", "WheelNoiseConfig"]
 
@@ -109,6 +110,8 @@ class FusionConfig:
             preceding the first stamp (only when no initial pose is given).
         gravity_window_s: length of that IMU window [s].
         estimate_gyro_bias_at_rest: start the gyro bias at the mean rate when at rest.
+        wheel_scale: online calibration of the wheel distance scale
+            (:mod:`lili_odom.fusion.wheel_scale`).
         wheel_weak_scale: factor on the wheel information outside the degenerate subspace
             (0 = wheels act only inside it, and not at all when nothing is degenerate).
         no_imu_sigma_translation_per_s: fallback motion-model sigma [m per s of interval].
@@ -134,6 +137,7 @@ class FusionConfig:
 
     imu: ImuNoiseConfig = field(default_factory=ImuNoiseConfig)
     wheel: WheelNoiseConfig = field(default_factory=WheelNoiseConfig)
+    wheel_scale: WheelScaleConfig = field(default_factory=WheelScaleConfig)
     lidar: LidarNoiseConfig = field(default_factory=LidarNoiseConfig)
     T_base_lidar: np.ndarray = field(default_factory=_default_T_base_lidar)
     T_base_imu: np.ndarray = field(default_factory=_default_T_base_imu)
@@ -167,6 +171,7 @@ class FusionConfig:
         out-of-range parameter (the nested imu/wheel/lidar configurations included)."""
         self.imu.validate(prefix + "imu.")
         self.wheel.validate(prefix + "wheel.")
+        self.wheel_scale.validate(prefix + "wheel_scale.")
         self.lidar.validate(prefix + "lidar.")
         for name in ("prior_sigma_translation", "prior_sigma_rotation", "prior_sigma_velocity",
                      "prior_sigma_velocity_moving", "prior_sigma_velocity_wheel",

@@ -20,7 +20,9 @@ Factors between consecutive states ``i-1 -> i``:
   earlier states are re-estimated and lets the fused history stay the reference of the map.
 * Wheel ``BetweenFactorPose3`` whose information lives only inside the degenerate subspace
   (the paper's solution remapping, as a factor). Without degeneracy there is no wheel factor
-  unless ``wheel_weak_scale`` > 0.
+  unless ``wheel_weak_scale`` > 0. The increment's distance is first divided by the wheel
+  scale estimated online from fully constrained registrations
+  (:mod:`lili_odom.fusion.wheel_scale`), since inside the subspace a scale error is drift.
 
 Error convention: GTSAM's ``BetweenFactorPose3`` error is ``Logmap(Z^-1 X(i-1)^-1 X(i))``, a
 twist in the body frame of ``X(i)``; all informations here are 6x6 in our ``(v, w)`` order in
@@ -71,6 +73,7 @@ from lili_odom.fusion.imu import (
 )
 from lili_odom.fusion.subspace import split_information, sqrt_information
 from lili_odom.fusion.wheel import WheelBuffer, wheel_information
+from lili_odom.fusion.wheel_scale import WheelScaleEstimator
 from lili_odom.geometry import exp, log, matrix, orthonormalize
 
 __all__ = ["FusionEstimator", "FusionOutput", "FusionStats"]
@@ -213,6 +216,7 @@ class FusionEstimator:
         self.imu = ImuBuffer(cfg.imu.buffer_seconds, max_abs_acc=cfg.imu.max_abs_acc,
                              max_abs_gyro=cfg.imu.max_abs_gyro)
         self.wheels = WheelBuffer(cfg.wheel)
+        self.wheel_scale = WheelScaleEstimator(cfg.wheel_scale)
         self.stats = FusionStats()
         self._params = make_preintegration_params(cfg.imu, self.T_base_imu)
         self._isam: gtsam.ISAM2 | None = None
@@ -450,6 +454,9 @@ class FusionEstimator:
             self.stats.n_rejected_wheel += 1
             notes.append("wheel increment rejected (implausible)")
             delta_w = None
+        raw_wheel = delta_w
+        if delta_w is not None:  # calibrated distance (fusion.wheel_scale)
+            delta_w = self.wheel_scale.correct(delta_w)
         if delta_w is None:
             self.stats.n_no_wheel += 1
             if T_meas is not None and len(basis):
@@ -575,6 +582,9 @@ class FusionEstimator:
             return None
         self.stats.n_updates += 1
         self._consecutive_failures = 0
+        if raw_wheel is not None and out.used_lidar and not len(basis) and T_meas is not None:
+            # a fully constrained registration measured this increment: calibrate the wheels
+            self.wheel_scale.observe(raw_wheel, np.linalg.inv(T_prev) @ T_meas)
         if dt >= 0.01:  # shorter intervals turn registration noise into absurd rates
             rate = log(np.linalg.inv(T_prev) @ out.pose) / dt
             # the constant-velocity fallback never extrapolates faster than the plausibility gates

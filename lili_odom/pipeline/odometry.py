@@ -164,9 +164,10 @@ class OdometryPipeline:
         """
         self.config.fusion.T_base_lidar = geometry.orthonormalize(T_base_lidar)
         self.config.fusion.T_base_imu = geometry.orthonormalize(T_base_imu)
-        imu, wheels = self.estimator.imu, self.estimator.wheels
+        imu, wheels, scale = self.estimator.imu, self.estimator.wheels, self.estimator.wheel_scale
         self.reset(count=False)
         self.estimator.imu, self.estimator.wheels = imu, wheels
+        self.estimator.wheel_scale = scale
 
     def reset(self, count: bool = True, keep_from: float | None = None) -> None:
         """Forget map, state and buffers (clock jump backwards, new bag loop).
@@ -260,6 +261,7 @@ class OdometryPipeline:
                 self._schedule.reset()
                 self._new_estimator()  # keeps the map; the state restarts at this scan
                 self.estimator.imu, self.estimator.wheels = old.imu, old.wheels
+                self.estimator.wheel_scale = old.wheel_scale  # same wheels, same calibration
                 reinit_pose = self._last_output.pose if self._last_output is not None else None
 
         est = self.estimator
@@ -354,7 +356,8 @@ class OdometryPipeline:
             warnings=warnings,
             details={"points": len(points), "source_points": len(source),
                      "threshold": self._matcher.threshold, "used_wheel": fused.used_wheel,
-                     "used_imu": fused.used_imu},
+                     "used_imu": fused.used_imu,
+                     "wheel_scale": est.wheel_scale.scale},
         )
         self._last_stamp = t_ref
         self._last_output = out
