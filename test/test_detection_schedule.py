@@ -115,3 +115,12 @@ def test_invalid_schedule_parameters_are_named():
     cfg.detection_schedule.reuse_distance_m = -1.0
     with pytest.raises(ValueError, match="detection_schedule.reuse_distance_m"):
         OdometryPipeline(cfg)
+
+
+def test_node_parameter_error_names_the_full_dotted_parameter():
+    from lili_odom.config import NodeConfig
+
+    cfg = NodeConfig()
+    cfg.pipeline.detection_schedule.max_reuse = -1
+    with pytest.raises(ValueError, match="pipeline.detection_schedule.max_reuse must be"):
+        cfg.validate()

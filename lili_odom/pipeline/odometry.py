@@ -9,7 +9,8 @@ measured offline is what runs on the robot. Per scan (``process_scan``):
 3. the sweep is deskewed with that predicted motion and registered to the local map
    (KISS-ICP, ``ScanMatcher``);
 4. the selected detector (``lili`` | ``zhang`` | ``hessian`` | ``none``) finds the degenerate
-   subspace of that registration, reusing the ICP optimum;
+   subspace of that registration, reusing the ICP optimum, unless a detection of the last
+   scans nearby can be carried over (:mod:`lili_odom.pipeline.detection_schedule`);
 5. iSAM2 fuses IMU preintegration, the LiDAR increment with the degenerate directions removed
    and the wheel increment only inside them (``FusionEstimator``);
 6. the local map is updated with the FUSED pose.
