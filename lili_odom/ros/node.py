@@ -338,6 +338,7 @@ class LiliOdomNode(Node):
         out["scans_dropped"] = self._scans.dropped
         out["input_overflow"] = self._inputs.overflow
         out["scans_waiting"] = self._feeder.pending
+        out["scans_queued"] = len(self._scans)  # handed over, not yet taken by the worker
         n = max(1, out["scans_processed"])
         out["mean_processing_s"] = round(self._processing_time / n, 4)
         for k, v in dict(getattr(self.pipeline, "counters", {}) or {}).items():
