@@ -199,7 +199,10 @@ def worker_play(job: dict) -> dict:
     rclpy.init(context=ctx, domain_id=int(env["ROS_DOMAIN_ID"]))
     node = LiliOdomNode(context=ctx, provider=OdometryPipelineProvider(),
                         parameter_overrides=parameters_from_mapping(
-                            {"pipeline.method": job["method"], "diagnostics_period": 0.0}))
+                            {"pipeline.method": job["method"], "diagnostics_period": 0.0,
+                             # play publishes RELIABLE: a lossless replay, so what is lost
+                             # is the node's doing (dropped, counted), not the transport's
+                             "reliable_inputs": True}))
     recorder = rclpy.create_node("recorder", context=ctx)
     got: list = []
     recorder.create_subscription(message_class("nav_msgs/msg/Odometry"), "/lili_odom/odometry",
