@@ -126,6 +126,7 @@ class NodeConfig:
         self.extrinsics.validate()
         _check_ranges(self)
         self.pipeline.fusion.validate("pipeline.fusion.")
+        self.pipeline.detection_schedule.validate("pipeline.detection_schedule.")
         self.pipeline.validate()
 
     def apply_extrinsics(self) -> None:
@@ -147,9 +148,6 @@ PARAMETER_RANGES: dict[str, tuple] = {
     "pipeline.detection_points": (0, 10**7, False, False, ""),
     "pipeline.sensor_wait_s": (0.0, 10.0, False, False, "s"),
     "pipeline.max_pending_scans": (1, 100, False, False, ""),
-    "pipeline.detection_schedule.max_reuse": (0, 1000, False, False, ""),
-    "pipeline.detection_schedule.reuse_distance_m": (0.0, 100.0, False, False, "m"),
-    "pipeline.detection_schedule.reuse_angle_deg": (0.0, 180.0, False, False, "deg"),
     "pipeline.scan_matcher.max_range": (0.0, 1000.0, True, False, "m"),
     "pipeline.scan_matcher.min_range": (0.0, 1000.0, False, True, "m"),
     "pipeline.scan_matcher.voxel_size": (0.0, 100.0, False, False, "m"),

@@ -38,6 +38,14 @@ class DetectionScheduleConfig:
     reuse_distance_m: float = 0.3
     reuse_angle_deg: float = 5.0
 
+    def validate(self, prefix: str = "detection_schedule.") -> None:
+        """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
+        from lili_odom.errors import check_range
+
+        check_range(prefix + "max_reuse", self.max_reuse, 0, 1000)
+        check_range(prefix + "reuse_distance_m", self.reuse_distance_m, 0.0, 100.0, unit="m")
+        check_range(prefix + "reuse_angle_deg", self.reuse_angle_deg, 0.0, 180.0, unit="deg")
+
 
 def carry_over(result: DegeneracyResult, pose: np.ndarray, age: int) -> DegeneracyResult:
     """``result`` re-expressed at the sensor pose ``pose`` (same motions in the odometry frame).

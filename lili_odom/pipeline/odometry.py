@@ -31,7 +31,7 @@ from lili_odom import geometry
 from lili_odom.degeneracy.hessian import HessianConfig, HessianDetector, ZhangConfig, ZhangDetector
 from lili_odom.degeneracy.lili import LiliConfig, LiliDetector
 from lili_odom.degeneracy.result import DegeneracyResult
-from lili_odom.errors import ThrottledWarnings, check_range
+from lili_odom.errors import ThrottledWarnings
 from lili_odom.fusion.config import FusionConfig
 from lili_odom.fusion.estimator import FusionEstimator
 from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionScheduleConfig
@@ -96,12 +96,7 @@ class PipelineConfig:
             raise ValueError(f"sensor_wait_s must be in [0, 10] s, got {self.sensor_wait_s}")
         if not 1 <= self.max_pending_scans <= 100:
             raise ValueError(f"max_pending_scans must be in [1, 100], got {self.max_pending_scans}")
-        ds = self.detection_schedule
-        check_range("detection_schedule.max_reuse", ds.max_reuse, 0, 1000)
-        check_range("detection_schedule.reuse_distance_m", ds.reuse_distance_m, 0.0, 100.0,
-                    unit="m")
-        check_range("detection_schedule.reuse_angle_deg", ds.reuse_angle_deg, 0.0, 180.0,
-                    unit="deg")
+        self.detection_schedule.validate()
         self.scan_matcher.validate()
         self.lili.validate()
 
