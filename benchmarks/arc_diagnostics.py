@@ -1,0 +1,149 @@
+"""Where does the tunnel error come from: the detector, or the estimate it is fed?
+
+    python benchmarks/arc_diagnostics.py probe --times 60 130 150 200 250 300
+    python benchmarks/arc_diagnostics.py jumps data/tunnel_runs/trial1_64x512_seed0/lili
+
+``probe`` runs LiLi on simulated Trial 1 scans registered against a local map built from the
+*true* poses (the previous ``--history`` seconds of scans, each column placed with its true
+pose, so no deskew or odometry error enters). Whatever LiLi reports there is the detector's
+own answer for that place; anything more it reports in the odometry comes from the estimate.
+The map and scan go through the odometry's own ``ScanMatcher`` settings (voxel 1 m, 0.5/1.5
+voxel downsampling, ``detection_points`` thinning).
+
+``jumps`` reads ``estimate.tum`` and ``truth.tum`` of a ``lili-odom run`` / ``evaluate`` run
+directory and counts scan-to-scan changes of the lateral position error (in the true body
+frame) above ``--threshold``: a registration that is stable to centimetres cannot produce
+them, an estimator that oscillates does.
+
+Both append a section to ``benchmarks/results/arc_diagnostics.md`` (``--out`` to change).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from lili_odom import geometry  # noqa: E402
+
+DEFAULT_OUT = ROOT / "benchmarks" / "results" / "arc_diagnostics.md"
+
+
+def probe(times: list[float], resolution: tuple[int, int], history: float) -> list[str]:
+    from kiss_icp.voxelization import voxel_down_sample
+
+    from lili_odom.degeneracy.lili import LiliDetector
+    from lili_odom.pipeline.odometry import PipelineConfig
+    from lili_odom.pipeline.scan_matcher import ScanMatcher
+    from lili_odom.sim.generator import SimRequest, Simulation
+
+    sim = Simulation(SimRequest(trial=1, resolution=resolution))
+    base_to_lidar = sim.sensors.extrinsics.base_to_lidar
+    period = sim.sensors.lidar.scan_period
+    cfg = PipelineConfig()
+
+    def scan_in_world(t_start: float) -> tuple[np.ndarray, np.ndarray]:
+        scan = sim.scan(t_start)
+        col_t = t_start + scan.t_ns.astype(float) * 1e-9
+        T = sim.trajectory.pose(col_t) @ base_to_lidar  # (cols, 4, 4) world <- os_lidar
+        xyz = scan.xyz.astype(float)
+        world = np.einsum("cij,rcj->rci", T[:, :3, :3], xyz) + T[None, :, :3, 3]
+        keep = np.all(np.isfinite(world), -1) & (np.linalg.norm(xyz, axis=-1) > cfg.scan_matcher.min_range)
+        return world[keep], sim.trajectory.pose(col_t[-1:])[0] @ base_to_lidar
+
+    lines = [f"## LiLi on a map from the true poses (Trial 1, {resolution[0]}x{resolution[1]}, "
+             f"{history:g} s of history)", "",
+             "| t [s] | x [m] | points | L [m] | dimension | PCA eigenvalues | basis (scaled, v / L w) |",
+             "|---|---|---|---|---|---|---|"]
+    detector = LiliDetector(cfg.lili)
+    for t in times:
+        matcher = ScanMatcher(cfg.scan_matcher)
+        voxel = matcher.config.voxel
+        for k in range(int(round(history / period)), 0, -1):
+            world, T_end = scan_in_world(t - k * period)
+            local = geometry.transform_points(np.linalg.inv(T_end), world)
+            matcher.update_map(voxel_down_sample(local, 0.5 * voxel), T_end, np.eye(4))
+        world, T_end = scan_in_world(t)
+        local = geometry.transform_points(np.linalg.inv(T_end), world)
+        source = voxel_down_sample(voxel_down_sample(local, 0.5 * voxel), 1.5 * voxel)
+        n = cfg.detection_points
+        if n and len(source) > n:
+            source = source[:: int(np.ceil(len(source) / n))]
+        res = detector.detect(matcher.reference, source, T_end)
+        basis = "; ".join("(" + ", ".join(f"{v:+.2f}" for v in row) + ")" for row in res.basis_scaled)
+        eig = ", ".join(f"{v:.2f}" for v in res.eigenvalues[:3]) if res.eigenvalues is not None else ""
+        lines.append(f"| {t:g} | {T_end[0, 3]:.1f} | {len(source)} | {res.characteristic_length:.1f} | "
+                     f"{res.dimension} | {eig} | {basis or '-'} |")
+        print(lines[-1], flush=True)
+    return lines + [""]
+
+
+def _tum(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    from scipy.spatial.transform import Rotation
+
+    data = np.loadtxt(path, ndmin=2)
+    T = np.tile(np.eye(4), (len(data), 1, 1))
+    T[:, :3, :3] = Rotation.from_quat(data[:, 4:8]).as_matrix()
+    T[:, :3, 3] = data[:, 1:4]
+    return data[:, 0], T
+
+
+def jumps(run_dir: Path, threshold: float) -> list[str]:
+    t_e, T_e = _tum(run_dir / "estimate.tum")
+    t_g, T_g = _tum(run_dir / "truth.tum")
+    idx = np.clip(np.searchsorted(t_g, t_e), 0, len(t_g) - 1)
+    T_g = T_g[idx]
+    align = T_g[0] @ np.linalg.inv(T_e[0])  # both start at the same pose
+    err = np.einsum("nij,njk->nik", np.linalg.inv(T_g), align @ T_e)
+    lateral = err[:, 1, 3]
+    step = np.abs(np.diff(lateral))
+    t = t_e[1:] - t_e[0]
+    edges = np.arange(0.0, t[-1] + 50.0, 50.0)
+    counts = np.histogram(t[step > threshold], bins=edges)[0]
+    lines = [f"## Lateral error jumps: `{run_dir.name}` of `{run_dir.parent.name}`", "",
+             f"Scan-to-scan changes of the lateral error (true body frame) above {threshold:g} m: "
+             f"{int((step > threshold).sum())} of {len(step)}; median change "
+             f"{np.median(step) * 100:.1f} cm, 99th percentile {np.percentile(step, 99) * 100:.1f} cm.",
+             "", "| window [s] | jumps |", "|---|---|"]
+    lines += [f"| {a:.0f}-{b:.0f} | {c} |" for a, b, c in zip(edges[:-1], edges[1:], counts)]
+    print("\n".join(lines))
+    return lines + [""]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("probe", help="LiLi against a map from the true poses")
+    p.add_argument("--times", type=float, nargs="+", default=[60, 130, 150, 200, 211, 250, 300])
+    p.add_argument("--resolution", default="64x512")
+    p.add_argument("--history", type=float, default=5.0, help="seconds of scans in the map")
+    j = sub.add_parser("jumps", help="lateral error jumps of a run directory")
+    j.add_argument("run_dir", type=Path)
+    j.add_argument("--threshold", type=float, default=0.05, help="[m]")
+    for q in (p, j):
+        q.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    args = parser.parse_args(argv)
+    if args.command == "probe":
+        rows, cols = (int(v) for v in args.resolution.lower().split("x"))
+        lines = probe(args.times, (rows, cols), args.history)
+    else:
+        if not (args.run_dir / "estimate.tum").exists() or not (args.run_dir / "truth.tum").exists():
+            print(f"error: {args.run_dir}: needs estimate.tum and truth.tum", file=sys.stderr)
+            return 2
+        lines = jumps(args.run_dir, args.threshold)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    header = "" if args.out.exists() else (
+        "# Tunnel diagnostics\n\nProduced by `benchmarks/arc_diagnostics.py` "
+        "(see its docstring); one section per invocation.\n\n")
+    with open(args.out, "a") as f:
+        f.write(header + "\n".join(lines) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
