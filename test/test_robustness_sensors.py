@@ -256,7 +256,9 @@ def test_inner_imu_faults_keep_poses_finite_and_put(fault):
 
     outs = sim.run(T0 + 1.5, 3.0, imu=imu)
     assert len(_ok(outs)) >= len(outs) - 1, dict(sim.pipe.counters)
-    assert _max_offset(outs) < (1.0 if fault == "clipped_at_range" else 0.1), fault
+    # 0.15 m: with the LiDAR kernel at 3 sigma (was 1) the rejected-stamp cases drift 0.12 m
+    # over these 3 s (under 0.1 m before); still bounded, a pose that runs away fails here
+    assert _max_offset(outs) < (1.0 if fault == "clipped_at_range" else 0.15), fault
     tail = _ok(outs)[-5:]
     assert all(o.details["used_imu"] for o in tail), (fault, [o.warnings for o in tail])
     if fault in ("nan", "saturated", "future_glitch", "past_glitch"):
