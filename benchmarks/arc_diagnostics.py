@@ -83,21 +83,17 @@ def probe(times: list[float], resolution: tuple[int, int], history: float) -> li
     return lines + [""]
 
 
-def _tum(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    from scipy.spatial.transform import Rotation
-
-    data = np.loadtxt(path, ndmin=2)
-    T = np.tile(np.eye(4), (len(data), 1, 1))
-    T[:, :3, :3] = Rotation.from_quat(data[:, 4:8]).as_matrix()
-    T[:, :3, 3] = data[:, 1:4]
-    return data[:, 0], T
-
-
 def jumps(run_dir: Path, threshold: float) -> list[str]:
-    t_e, T_e = _tum(run_dir / "estimate.tum")
-    t_g, T_g = _tum(run_dir / "truth.tum")
-    idx = np.clip(np.searchsorted(t_g, t_e), 0, len(t_g) - 1)
-    T_g = T_g[idx]
+    from evo.core import sync
+    from evo.core.trajectory import PoseTrajectory3D
+
+    from lili_odom.bagio.tum import read_tum
+
+    trajectories = [PoseTrajectory3D(poses_se3=list(T), timestamps=t)
+                    for t, T in (read_tum(run_dir / "truth.tum"), read_tum(run_dir / "estimate.tum"))]
+    truth, est = sync.associate_trajectories(*trajectories, max_diff=0.02)
+    T_g, T_e = np.array(truth.poses_se3), np.array(est.poses_se3)
+    t_e = np.asarray(est.timestamps)
     align = T_g[0] @ np.linalg.inv(T_e[0])  # both start at the same pose
     err = np.einsum("nij,njk->nik", np.linalg.inv(T_g), align @ T_e)
     lateral = err[:, 1, 3]
