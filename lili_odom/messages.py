@@ -194,7 +194,8 @@ def default_cloud_parser(min_range: float = 0.0, max_range: float = math.inf,
     def parse(msg: Any, stamp: float) -> tuple[np.ndarray, np.ndarray | None, int]:
         from lili_odom.pointcloud2 import parse_cloud  # lazy: keeps this module light
 
-        parsed = parse_cloud(msg, min_range=min_range, max_range=max_range, stamp=stamp)
+        parsed = parse_cloud(msg, min_range=min_range, max_range=max_range, stamp=stamp,
+                             extra_fields=False)
         s = parsed.stats
         if s.times_ignored:
             if counters is not None:

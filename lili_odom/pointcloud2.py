@@ -280,15 +280,39 @@ def _validate(msg: Any) -> tuple[list[PointFieldSpec], bool, int, int, int, int,
 # parsing
 
 
-def _read_field(records: np.ndarray, spec: PointFieldSpec, big: bool, point_step: int) -> np.ndarray:
-    """First element of one field of every point, as float64 (or int64 for integers)."""
+def _field_view(records: np.ndarray, spec: PointFieldSpec, big: bool, point_step: int
+                ) -> np.ndarray:
+    """First element of one field of every point: a strided view in the field's own type."""
     base = DATATYPES[spec.datatype].newbyteorder(">" if big else "<")
     dt = np.dtype({"names": ["v"], "formats": [base], "offsets": [spec.offset],
                    "itemsize": point_step})
-    values = records.view(dt)["v"]
-    if base.kind == "f":
-        return values.astype(np.float64)
-    return values.astype(np.int64)
+    return records.view(dt)["v"]
+
+
+def _read_float(records: np.ndarray, spec: PointFieldSpec, big: bool, point_step: int
+                ) -> np.ndarray:
+    """First element of one field of every point as contiguous float64 (integers of up to 32
+    bits convert exactly, so this equals reading them as int64 first)."""
+    return _field_view(records, spec, big, point_step).astype(np.float64)
+
+
+def _read_xyz(records: np.ndarray, specs: Sequence[PointFieldSpec], big: bool,
+              point_step: int) -> np.ndarray:
+    """x, y, z of every point as an (N, 3) float64 array in column-major order (each column
+    contiguous). Adjacent fields of one datatype (the usual layout) are read in one pass over
+    the records as a 3-element subarray."""
+    x, y, z = specs
+    size = DATATYPES[x.datatype].itemsize
+    if (x.datatype == y.datatype == z.datatype and y.offset == x.offset + size
+            and z.offset == x.offset + 2 * size):
+        base = DATATYPES[x.datatype].newbyteorder(">" if big else "<")
+        dt = np.dtype({"names": ["v"], "formats": [(base, (3,))], "offsets": [x.offset],
+                       "itemsize": point_step})
+        return records.view(dt)["v"].astype(np.float64, order="F")
+    out = np.empty((records.shape[0], 3), order="F")
+    for column, spec in enumerate(specs):
+        out[:, column] = _field_view(records, spec, big, point_step)
+    return out
 
 
 def _find(fields: Sequence[PointFieldSpec], name: str) -> PointFieldSpec | None:
@@ -296,6 +320,21 @@ def _find(fields: Sequence[PointFieldSpec], name: str) -> PointFieldSpec | None:
         if f.name == name and f.count >= 1:
             return f
     return None
+
+
+def _median_exceeds(values: np.ndarray, threshold: float) -> bool:
+    """``np.median(values) > threshold`` for a non-empty array without NaN, in one pass.
+
+    With more than half of the values above (at or below) the threshold, both middle values
+    are, and so is their mean; only a tie at exactly half needs the median itself.
+    """
+    n = values.size
+    above = int(np.count_nonzero(values > threshold))
+    if 2 * above > n:
+        return True
+    if 2 * above < n:
+        return False
+    return bool(float(np.median(values)) > threshold)
 
 
 def _time_conversion(raw_t: np.ndarray, spec: PointFieldSpec, stamp: float | None
@@ -309,16 +348,17 @@ def _time_conversion(raw_t: np.ndarray, spec: PointFieldSpec, stamp: float | Non
     subtracted when given, otherwise the earliest point time (so times stay small and
     monotonic, relative to the first point instead of the stamp).
     """
-    finite = raw_t[np.isfinite(raw_t)]
+    integer = DATATYPES[spec.datatype].kind in "iu"
+    finite = raw_t if integer else raw_t[np.isfinite(raw_t)]
     if finite.size == 0:
         return 1.0, 0.0
-    if DATATYPES[spec.datatype].kind in "iu":
+    if integer:
         scale = 1e-9
     else:
         span = float(finite.max() - finite.min())
         scale = 1e-9 if (span > 10.0 or float(np.abs(finite).max()) > 1e12) else 1.0
     scaled = finite * scale
-    if float(np.median(np.abs(scaled))) > 1e5:
+    if _median_exceeds(np.abs(scaled), 1e5):
         offset = float(stamp) if stamp is not None and math.isfinite(stamp) else float(
             scaled.min())
         return scale, offset
@@ -332,6 +372,7 @@ def parse_cloud(
     max_range: float = math.inf,
     stamp: float | None = None,
     max_sweep_s: float = MAX_SWEEP_S,
+    extra_fields: bool = True,
 ) -> ParsedCloud:
     """Parse PointCloud2 content into valid points and per-point times.
 
@@ -346,6 +387,9 @@ def parse_cloud(
             dropped, ``stats.n_bad_time``); a time field with no finite value or a span
             longer than this is ignored (``times`` None, ``stats.times_ignored`` says why)
             and the points are kept.
+        extra_fields: also return the ``intensity``, ``range`` and ``ring`` of the kept points;
+            False leaves them None (the odometry uses points and times only). A ``range``
+            field still marks zero-range points either way.
 
     Returns:
         The kept points (NaN/Inf, zero-range, out-of-range and corrupt-time points removed)
@@ -372,25 +416,30 @@ def parse_cloud(
     records = np.ascontiguousarray(rows).reshape(n_total, point_step)
     records = records.view(np.dtype((np.void, point_step))).reshape(n_total)
 
-    xyz = np.stack([_read_field(records, _find(fields, a), big, point_step) for a in "xyz"],
-                   axis=1).astype(np.float64)
+    # One contiguous float64 column per coordinate, read in one pass over the records:
+    # every test below is element-wise on these columns (no (N, 3) reductions, no per-point
+    # Python), and only the kept points are gathered into the (N, 3) output.
+    xyz_all = _read_xyz(records, [_find(fields, a) for a in "xyz"], big, point_step)
+    x, y, z = xyz_all[:, 0], xyz_all[:, 1], xyz_all[:, 2]
 
     times = None
     scale, offset = 1.0, 0.0
     if t_spec is not None:
-        raw_t = _read_field(records, t_spec, big, point_step).astype(np.float64)
+        raw_t = _read_float(records, t_spec, big, point_step)
         scale, offset = _time_conversion(raw_t, t_spec, stamp)
         times = raw_t * scale - offset
 
     def optional(name: str) -> np.ndarray | None:
         spec = _find(fields, name)
-        return None if spec is None else _read_field(records, spec, big, point_step)
+        return None if spec is None else _field_view(records, spec, big, point_step)
 
-    intensity = optional("intensity")
+    intensity = optional("intensity") if extra_fields else None
     rng = optional("range")
-    ring = optional("ring")
+    ring = optional("ring") if extra_fields else None
 
-    xyz_finite = np.all(np.isfinite(xyz), axis=1)
+    xyz_finite = np.isfinite(x)
+    xyz_finite &= np.isfinite(y)
+    xyz_finite &= np.isfinite(z)
     bad_time = np.zeros(n_total, dtype=bool)
     times_ignored = ""
     if times is not None:
@@ -402,8 +451,12 @@ def parse_cloud(
         finite = xyz_finite.copy()
         if times is not None:
             finite &= np.isfinite(times)
-        norm = np.full(n_total, np.nan)
-        norm[finite] = np.linalg.norm(xyz[finite], axis=1)
+        # the Euclidean norm as np.linalg.norm computes it (sqrt of x^2 + y^2 + z^2 summed in
+        # that order); only read where ``finite`` holds
+        norm = x * x
+        norm += y * y
+        norm += z * z
+        np.sqrt(norm, out=norm)
         zero = finite & (norm == 0.0)
         if rng is not None:
             zero |= finite & (rng == 0)
@@ -424,16 +477,21 @@ def parse_cloud(
     stats.n_kept = int(np.count_nonzero(keep))
     stats.times_ignored = times_ignored
 
-    def sel(a: np.ndarray | None, dtype: Any) -> np.ndarray | None:
-        return None if a is None else np.asarray(a[keep], dtype=dtype)
+    index = np.flatnonzero(keep)
 
+    def sel(a: np.ndarray | None, dtype: Any) -> np.ndarray | None:
+        return None if a is None else a[index].astype(dtype)
+
+    xyz = np.empty((len(index), 3))
+    for column, values in enumerate((x, y, z)):
+        np.take(values, index, out=xyz[:, column])
     return ParsedCloud(
-        xyz=xyz[keep],
+        xyz=xyz,
         times=sel(times, np.float64),
         intensity=sel(intensity, np.float64),
-        range=sel(rng, np.float64),
+        range=sel(rng, np.float64) if extra_fields else None,
         ring=sel(ring, np.int64),
-        index=np.flatnonzero(keep).astype(np.int64),
+        index=index.astype(np.int64),
         time_field=t_spec.name if t_spec is not None and times is not None else "",
         time_scale=scale,
         time_offset=offset,

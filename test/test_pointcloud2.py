@@ -72,6 +72,42 @@ def test_ouster_original_layout(zeros: bool, big: bool) -> None:
     assert s.n_kept + s.n_nonfinite + s.n_zero_range + s.n_too_close + s.n_too_far == s.n_total
 
 
+
+@pytest.mark.parametrize("big", [False, True])
+def test_without_extra_fields_same_points(big: bool) -> None:
+    """extra_fields=False: same points, times and counts; intensity/range/ring left out, and
+    the range field still marks zero-range points."""
+    msg, xyz, t = ouster_cloud(zeros_for_missing=True, big=big)
+    full, lean = parse_cloud(msg), parse_cloud(msg, extra_fields=False)
+    np.testing.assert_array_equal(lean.xyz, full.xyz)
+    np.testing.assert_array_equal(lean.times, full.times)
+    np.testing.assert_array_equal(lean.index, full.index)
+    assert lean.intensity is None and lean.range is None and lean.ring is None
+    assert vars(lean.stats) == vars(full.stats) and lean.stats.n_zero_range > 0
+
+
+def test_xyz_in_any_field_order() -> None:
+    """x, y, z not adjacent or of mixed types read the same as the packed layout."""
+    rng = np.random.default_rng(3)
+    xyz = rng.uniform(-20, 20, (50, 3)).astype(np.float32)
+    rec = np.zeros(50, dtype={"names": ["z", "pad", "x", "y"],
+                              "formats": ["<f8", "<u2", "<f4", "<f4"],
+                              "offsets": [0, 8, 12, 20], "itemsize": 28})
+    rec["x"], rec["y"], rec["z"] = xyz.T
+    fields = [PointFieldSpec("z", 0, 8), PointFieldSpec("x", 12, 7), PointFieldSpec("y", 20, 7)]
+    out = parse_cloud(CloudContent(fields, False, 28, 28 * 50, 1, 50, rec.tobytes()))
+    np.testing.assert_array_equal(out.xyz, xyz.astype(np.float64))
+    assert out.xyz.flags.c_contiguous
+
+
+@pytest.mark.parametrize("values", [[1.0, 2e5, 3e5, 4.0], [1.0, 1e5, 2e5, 3e5], [1.0, 2.0, 3e5],
+                                    [2e5, 3e5, 1.0], [1e5 - 1, 1e5 + 3], [7.0]])
+def test_median_threshold_matches_numpy(values: list) -> None:
+    from lili_odom.pointcloud2 import _median_exceeds
+
+    a = np.asarray(values)
+    assert _median_exceeds(a, 1e5) == (np.median(a) > 1e5)
+
 def test_message_like_objects_and_payload_types() -> None:
     msg, xyz, _ = ouster_cloud()
     fields = [SimpleNamespace(name=f.name, offset=f.offset, datatype=f.datatype, count=f.count)
