@@ -162,6 +162,8 @@ PARAMETER_RANGES: dict[str, tuple] = {
     "pipeline.lili.tau_pca": (0.0, _INF, True, False, ""),
     "pipeline.lili.ratio_points": (1, 10**7, False, False, ""),
     "pipeline.lili.min_points": (10, 10**7, False, False, ""),
+    "pipeline.lili.return_ratio": (0.0, 1.0, False, True, ""),
+    "pipeline.lili.return_check_iterations": (1, 10000, False, False, ""),
     "pipeline.zhang.eigenvalue_threshold": (0.0, _INF, True, False, ""),
     "pipeline.zhang.num_neighbors": (3, 100, False, False, ""),
     "pipeline.zhang.max_neighbor_distance": (0.0, 100.0, True, False, "m"),

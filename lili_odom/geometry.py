@@ -47,14 +47,20 @@ def from_gtsam_order(xi: np.ndarray) -> np.ndarray:
 def is_valid_pose(T: np.ndarray, tol: float = 1e-6) -> bool:
     """True when ``T`` is a finite 4x4 rigid transform (rotation orthonormal within ``tol``)."""
     T = np.asarray(T)
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+    if T.shape != (4, 4) or not np.isfinite(T).all():
         return False
     R = T[:3, :3]
-    return (
-        np.allclose(R.T @ R, np.eye(3), atol=tol)
-        and abs(np.linalg.det(R) - 1.0) < tol
-        and np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=tol)
-    )
+    # np.allclose(a, b, atol=tol) written out (|a - b| <= tol + 1e-5 |b|): this runs several
+    # times per ICP call, and allclose's generality costs more than the check itself
+    if not (np.abs(R.T @ R - _EYE3) <= tol + 1e-5 * _EYE3).all():
+        return False
+    if not abs(np.linalg.det(R) - 1.0) < tol:
+        return False
+    return bool((np.abs(T[3] - _LAST_ROW) <= tol + 1e-5 * _LAST_ROW).all())
+
+
+_EYE3 = np.eye(3)
+_LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
 
 
 def orthonormalize(T: np.ndarray) -> np.ndarray:

@@ -172,3 +172,34 @@ def test_perturbation_settings_validation():
     assert det.registration.max_iterations == 100
     default = LiliDetector()
     assert default.perturbation_registration is default.registration
+
+
+def test_return_check_settings_validation():
+    for bad in ({"return_ratio": -0.1}, {"return_ratio": 0.2}, {"return_ratio": 0.5},
+                {"return_check_iterations": 0}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            LiliConfig(**bad)
+    LiliConfig(return_ratio=0.0, return_check_iterations=1)
+
+
+def test_return_check_keeps_the_plane_subspace():
+    """Stopping the runs that came back: same kept twists and subspace as running every
+    perturbed re-registration to convergence (the paper)."""
+    ref, scan, T = plane_pair(seed=1)
+    rm = reference_for_detection(ref)
+    paper = LiliDetector().detect(rm, scan, T)
+    fast = LiliDetector(LiliConfig(return_ratio=0.1)).detect(rm, scan, T)
+    assert paper.ok and fast.ok and fast.dimension == paper.dimension == 3
+    assert np.array_equal(fast.kept, paper.kept)
+    assert paper.details["returned_early"] == 0 and fast.details["returned_early"] > 0
+    assert fast.details["returned_early"] <= int((~paper.kept).sum())
+    assert np.allclose(fast.projector_scaled(), paper.projector_scaled(), atol=0.02)
+
+
+def test_return_check_in_the_node_parameter_table():
+    from lili_odom.config import NodeConfig
+
+    cfg = NodeConfig()
+    cfg.pipeline.lili.return_check_iterations = 0
+    with pytest.raises(ValueError, match="pipeline.lili.return_check_iterations"):
+        cfg.validate()

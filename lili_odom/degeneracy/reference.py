@@ -144,7 +144,8 @@ class GuardedRegistration:
         except ValueError as exc:
             return AlignmentResult(np.eye(4), False, f"invalid initial guess: {exc}")
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        points = points[np.all(np.isfinite(points), axis=1)]
+        if not np.isfinite(points).all():
+            points = points[np.all(np.isfinite(points), axis=1)]
         if len(points) < MIN_POINTS:
             return AlignmentResult(guess, False, f"only {len(points)} finite scan points")
         if reference.voxel_map.empty():
