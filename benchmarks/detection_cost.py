@@ -1,13 +1,14 @@
 """What the detector's cost savings do to the detected subspace and to the odometry.
 
     python benchmarks/detection_cost.py                  # LiLi, two 40 s pieces of Trial 1
-    python benchmarks/detection_cost.py --variant reuse4 detection_schedule.max_reuse=4
+    python benchmarks/detection_cost.py --variant reuse6 detection_schedule.max_reuse=6
 
 For each piece of the simulated tunnel Trial 1 (default 64x512: the cluttered entrance from 0 s
 and the featureless stretch from 70 s, 40 s each) the odometry runs once with the *reference*
 detector settings (the paper's: every scan, every scan point up to ``detection_points``, 100
-ICP iterations per perturbed re-registration) and once per *variant* (pipeline parameters
-overridden, dotted names as in ``config/lili_odom.yaml`` below ``pipeline``). Per run: ATE /
+ICP iterations per perturbed re-registration, each run to convergence) and once per *variant*
+(pipeline parameters overridden, dotted names as in ``config/lili_odom.yaml`` below
+``pipeline``). Per run: ATE /
 RPE / final error (evo), the share of scans on which the detector ran, the mean detector time
 per scan [ms], scans/s, and against the reference, scan by scan: the share of scans with the
 same detected dimension and the largest principal angle between the two subspaces (scaled
@@ -20,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import sys
 import tempfile
 import time
@@ -71,13 +73,13 @@ def self_consistency(ref) -> dict:
 
 #: the paper's LiLi settings, every scan
 REFERENCE = {"detection_schedule.max_reuse": 0, "lili.perturbation_points": 0,
-             "lili.perturbation_iterations": 0}
+             "lili.perturbation_iterations": 0, "lili.return_ratio": 0.0}
 #: variants measured by default (each overrides the reference)
 VARIANTS = {
-    "reuse2": {"detection_schedule.max_reuse": 2},
-    "points1500": {"lili.perturbation_points": 1500},
-    "iterations30": {"lili.perturbation_iterations": 30},
-    "reuse2+points1500": {"detection_schedule.max_reuse": 2, "lili.perturbation_points": 1500},
+    "reuse2": {"detection_schedule.max_reuse": 2, "detection_schedule.reuse_distance_m": 0.3},
+    "return0.1": {"lili.return_ratio": 0.1},
+    "reuse4+return0.1": {"detection_schedule.max_reuse": 4,
+                         "detection_schedule.reuse_distance_m": 0.5, "lili.return_ratio": 0.1},
 }
 
 
@@ -102,6 +104,7 @@ def one_run(bag: Path, method: str, name: str, overrides: dict, work: Path, labe
         _set(config.pipeline, key, value)
     config.validate()
     t0 = time.perf_counter()
+    load0 = os.getloadavg()[0]
     run = run_bag(bag, config, work / f"{label}_{name}", progress=False)
     s, m = run.summary, run.summary.get("metrics") or {}
     det = np.asarray(run.timings.get("detector", [0.0]))
@@ -111,7 +114,8 @@ def one_run(bag: Path, method: str, name: str, overrides: dict, work: Path, labe
            "ate_rmse_m": m.get("ate_rmse_m"), "rpe_rmse_m": m.get("rpe_rmse_m"),
            "rpe_segment_m": m.get("rpe_segment_m"), "final_error_m": m.get("final_error_m"),
            "degenerate_fraction": s["degenerate_fraction"], "mean_dimension": s["mean_dimension"],
-           "wall_s": time.perf_counter() - t0}
+           "wall_s": time.perf_counter() - t0,
+           "load_average": 0.5 * (load0 + os.getloadavg()[0])}
     print(f"{label:12s} {name:18s}: {row['scans']} scans, detector on "
           f"{100 * row['detector_share']:.0f} %, {row['detector_ms']:.0f} ms/scan, "
           f"{row['scans_per_second']:.1f} scans/s, ATE {row['ate_rmse_m']:.3f} m", flush=True)
@@ -128,16 +132,21 @@ def markdown(report: dict) -> str:
         + "; ".join(f"`{n}` = " + ", ".join(f"`{k}={v}`" for k, v in o.items())
                     for n, o in report["variants"].items())
         + ". Reuse carries a detection over to at most `max_reuse` following scans within "
-        f"{report['reuse_distance_m']:g} m and {report['reuse_angle_deg']:g} deg of it. "
+        f"`reuse_distance_m` (default {report['reuse_distance_m']:g} m) and "
+        f"{report['reuse_angle_deg']:g} deg of it; `return_ratio` stops a perturbed "
+        "re-registration once it came back (ratio below it; 0 = every run to convergence). "
         "Same dim: scans whose detected dimension equals the reference's on the same scan; "
         "angle: largest principal angle to the reference's subspace where both are degenerate "
         "with equal dimension (scaled space). The reference's row gives, in those two columns, "
         "the detector's own spread: each scan of the reference against the next one. "
-        "Detector time is the mean over all scans, reused ones included.",
+        "Detector time is the mean over all scans, reused ones included; load: the machine's "
+        "1-min load average (mean of the run's start and end; 2 cores): detector times and "
+        "scans/s of runs under different load do not compare.",
         "",
         "| piece | settings | detector runs | detector [ms/scan] | scans/s | ATE [m] | RPE [m] "
-        "(segment) | final [m] | degenerate | mean dim | same dim | angle mean / p95 [deg] |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "(segment) | final [m] | degenerate | mean dim | same dim | angle mean / p95 [deg] "
+        "| load |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for piece, rows in report["pieces"].items():
         for r in rows:
@@ -149,7 +158,8 @@ def markdown(report: dict) -> str:
                 f"| {piece} | {r['variant']} | {100 * r['detector_share']:.0f} % | "
                 f"{r['detector_ms']:.0f} | {r['scans_per_second']:.1f} | {r['ate_rmse_m']:.3f} | "
                 f"{r['rpe_rmse_m']:.3f} ({r['rpe_segment_m']:.0f} m) | {r['final_error_m']:.3f} | "
-                f"{100 * r['degenerate_fraction']:.0f} % | {r['mean_dimension']:.2f} | " + tail)
+                f"{100 * r['degenerate_fraction']:.0f} % | {r['mean_dimension']:.2f} | " + tail
+                + (f" {r['load_average']:.1f} |" if "load_average" in r else " - |"))
     lines += ["", f"Machine: {report['machine']}.", ""]
     return "\n".join(lines)
 

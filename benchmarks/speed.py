@@ -2,6 +2,8 @@
 
     python benchmarks/speed.py                        # 300 scans from 90 s and from 5 s of Trial 1
     python benchmarks/speed.py --scans 30 --start 90 --methods kiss lili
+    python benchmarks/speed.py --set lili.return_ratio=0.1 --name speed_return   # opt-in settings
+    python benchmarks/speed.py --previous old/speed.json   # also show an earlier run's figures
 
 On the same scans of the simulated tunnel Trial 1 (128 x 1024, seed 0; one piece per window,
 from the simulator cache, generated first if absent, about 30 s each), one after the other, each in its own fresh
@@ -101,8 +103,27 @@ def _rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB on Linux
 
 
+def apply_overrides(pipeline_config: Any, overrides: dict[str, str]) -> None:
+    """Set dotted parameters below ``pipeline`` (``lili.return_ratio``) from strings."""
+    for dotted, value in overrides.items():
+        *path, leaf = dotted.split(".")
+        obj = pipeline_config
+        for part in path:
+            obj = getattr(obj, part)
+        if not hasattr(obj, leaf):
+            raise SystemExit(f"speed: unknown parameter pipeline.{dotted}")
+        current = getattr(obj, leaf)
+        if isinstance(current, bool):
+            if value.lower() not in ("true", "false"):
+                raise SystemExit(f"speed: pipeline.{dotted} must be true or false")
+            setattr(obj, leaf, value.lower() == "true")
+        else:
+            setattr(obj, leaf, type(current)(value))
+
+
 def run_method(bag: Path | str, method: str, start: float, scans: int, warmup: int,
-               progress: bool = False) -> dict[str, Any]:
+               progress: bool = False, overrides: dict[str, str] | None = None
+               ) -> dict[str, Any]:
     """Run ``method`` over ``scans`` scans from ``start`` s into the bag, in this process.
 
     Returns a JSON-ready dict: scans, scans_per_s, stages (mean/p95/max ms or None),
@@ -116,6 +137,7 @@ def run_method(bag: Path | str, method: str, start: float, scans: int, warmup: i
     config = load_config(None)
     if method != "kiss":
         config.pipeline.method = method
+        apply_overrides(config.pipeline, overrides or {})
     config.validate()
     sm = config.pipeline.scan_matcher
     topics = [config.lidar_topic, config.imu_topic, config.wheel_topic]
@@ -350,7 +372,8 @@ def machine_info() -> dict[str, Any]:
 # ----------------------------------------------------------------------------- driver
 
 def _run_in_fresh_process(bag: Path, method: str, start: float, scans: int, warmup: int,
-                          progress: bool) -> dict[str, Any]:
+                          progress: bool, overrides: dict[str, str] | None = None
+                          ) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="lili_speed_") as tmp:
         out = Path(tmp) / "result.json"
         cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", str(out), "--bag", str(bag),
@@ -358,6 +381,8 @@ def _run_in_fresh_process(bag: Path, method: str, start: float, scans: int, warm
                "--warmup", str(warmup)]
         if not progress:
             cmd.append("--no-progress")
+        for key, value in (overrides or {}).items():
+            cmd += ["--set", f"{key}={value}"]
         proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=None, text=True)
         if proc.returncode != 0 or not out.exists():
             raise RuntimeError(f"{method} @ {start:g} s failed (exit {proc.returncode}): "
@@ -383,7 +408,8 @@ def _targets(results: dict[str, dict]) -> dict[str, Any]:
 
 
 def benchmark(bag: Path | str | dict, methods=METHODS, starts=(90.0, 5.0), scans: int = 300,
-              warmup: int = 10, progress: bool = True) -> dict[str, Any]:
+              warmup: int = 10, progress: bool = True,
+              overrides: dict[str, str] | None = None) -> dict[str, Any]:
     """Every method on every window, each in a fresh process; the JSON-ready results.
 
     ``bag`` is one bag holding every window (``starts`` are seconds into it), or a dict
@@ -405,7 +431,8 @@ def benchmark(bag: Path | str | dict, methods=METHODS, starts=(90.0, 5.0), scans
             c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
             w0 = time.monotonic()
             piece, offset = pieces[start]
-            r = _run_in_fresh_process(piece, method, float(offset), scans, warmup, progress)
+            r = _run_in_fresh_process(piece, method, float(offset), scans, warmup, progress,
+                                      overrides)
             r["other_load_cores"] = _other_load(b0, c0, time.monotonic() - w0)
             res[method] = r
             if progress:
@@ -426,6 +453,7 @@ def benchmark(bag: Path | str | dict, methods=METHODS, starts=(90.0, 5.0), scans
         "scans": scans,
         "warmup": warmup,
         "methods": list(methods),
+        "overrides": dict(overrides or {}),
         "machine": machine_info(),
         "load": {"loadavg_before": list(load0), "loadavg_after": list(os.getloadavg()),
                  "wall_s": wall,
@@ -441,6 +469,45 @@ def _fmt(x: float | None, digits: int = 1) -> str:
     return "–" if x is None or not np.isfinite(x) else f"{x:.{digits}f}"
 
 
+def previous_summary(previous: dict[str, Any]) -> dict[str, Any]:
+    """The figures of an earlier ``speed.json`` that the report shows next to the new ones:
+    per window (start [s]) and method scans/s, x KISS and mean parse / deskew / detector /
+    total [ms]; with that run's commit and the other processes' load."""
+    windows = {}
+    for w in previous["windows"]:
+        rows = {}
+        for name, r in w["methods"].items():
+            st = r["stages"]
+            rows[name] = {"scans_per_s": r["scans_per_s"], "time_vs_kiss": r.get("time_vs_kiss"),
+                          **{f"{k}_ms": (st[k]["mean_ms"] if st.get(k) else None)
+                             for k in ("parse", "deskew", "detector", "total")}}
+            if st.get("detector"):
+                rows[name]["detector_p95_ms"] = st["detector"]["p95_ms"]
+        windows[f"{w['start_s']:g}"] = rows
+    return {"commit": previous["machine"]["commit"],
+            "other_processes_cores": previous["load"]["other_processes_cores"],
+            "windows": windows}
+
+
+def _previous_lines(prev: dict[str, Any], start: float, methods) -> list[str]:
+    rows = prev["windows"].get(f"{start:g}")
+    if not rows:
+        return []
+    cells = []
+    for name in methods:
+        r = rows.get(name)
+        if r is None:
+            continue
+        label = "KISS-ICP" if name == "kiss" else f"`{name}`"
+        extra = (f", detector {_fmt(r['detector_ms'])} / {_fmt(r.get('detector_p95_ms'))} ms"
+                 if name not in ("kiss", "none") and r.get("detector_ms") is not None else "")
+        cells.append(f"{label} {_fmt(r['scans_per_s'])} scans/s ({_fmt(r['time_vs_kiss'], 2)}x"
+                     f" KISS; parse {_fmt(r['parse_ms'])}, deskew {_fmt(r['deskew_ms'])}{extra}, "
+                     f"total {_fmt(r['total_ms'])} ms)")
+    return ["", f"Before (commit `{prev['commit']}`, same command, other load "
+                f"{prev['other_processes_cores']:.2f} cores): " + "; ".join(cells) + "."]
+
+
 def markdown(report: dict[str, Any], command: str) -> str:
     m, load = report["machine"], report["load"]
     lines = [
@@ -449,7 +516,10 @@ def markdown(report: dict[str, Any], command: str) -> str:
         f"`{command}`: {report['scans']} scans of `{report['bag']}` per window and method "
         f"(the first {report['warmup']} not counted), each method in its own fresh process, "
         "one after the other. The bag is decoded outside the timings; timed is what the node "
-        "does: parsing the PointCloud2, IMU/wheel buffering and the pipeline stages.",
+        "does: parsing the PointCloud2, IMU/wheel buffering and the pipeline stages."
+        + (" Our pipeline runs with " + ", ".join(f"`pipeline.{k}={v}`"
+                                                  for k, v in report["overrides"].items())
+           + " instead of the defaults." if report.get("overrides") else ""),
         "",
         f"Machine: {m['cpu']}, {m['cores']} cores, Python {m['python']}; commit `{m['commit']}`"
         + (f" with uncommitted changes in {', '.join('`' + p + '`' for p in m['uncommitted_lili_odom'])}"
@@ -485,6 +555,8 @@ def markdown(report: dict[str, Any], command: str) -> str:
             lines.append(f"| {label} | {_fmt(r['scans_per_s'])} | {_fmt(r['time_vs_kiss'], 2)} | "
                          + " | ".join(cells) + f" | {r['rss_peak_mb']:.0f} | {deg} | "
                          f"{r.get('other_load_cores', float('nan')):.2f} |")
+        if report.get("previous"):
+            lines += _previous_lines(report["previous"], w["start_s"], w["methods"])
         t = w["targets"]
         if t:
             lines += ["", "Targets:"]
@@ -515,15 +587,26 @@ def main(argv=None) -> int:
     ap.add_argument("--bag", type=Path, help="bag to use (default: the cached Trial 1 bag)")
     ap.add_argument("--resolution", default="128x1024", help="of the Trial 1 bag")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results",
-                    help="directory for speed.md and speed.json")
+                    help="directory for the results (default benchmarks/results)")
+    ap.add_argument("--name", default="speed",
+                    help="file name of the results without .md/.json (default speed)")
     ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="pipeline parameter for our methods instead of its default (dotted "
+                    "below pipeline, e.g. lili.return_ratio=0.1; repeatable)")
+    ap.add_argument("--previous", type=Path,
+                    help="an earlier speed.json whose figures the report shows as 'Before'")
     ap.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.scans <= args.warmup:
         ap.error("--scans must exceed --warmup")
+    try:
+        overrides = dict(item.split("=", 1) for item in args.set)
+    except ValueError:
+        ap.error("--set takes KEY=VALUE")
     if args.worker is not None:  # one method in this (fresh) process
         r = run_method(args.bag, args.methods[0], args.start[0], args.scans, args.warmup,
-                       progress=not args.no_progress)
+                       progress=not args.no_progress, overrides=overrides)
         args.worker.write_text(json.dumps(r))
         return 0
     bag = args.bag
@@ -540,15 +623,21 @@ def main(argv=None) -> int:
             bag[start] = (ensure_trial_bag(1, resolution=args.resolution, seed=0, start=t0,
                                            duration=(start - t0) + args.scans / 10.0 + 1.0,
                                            progress=not args.no_progress), start - t0)
+    previous = (previous_summary(json.loads(args.previous.read_text()))
+                if args.previous is not None else None)
     report = benchmark(bag, args.methods, args.start, args.scans, args.warmup,
-                       progress=not args.no_progress)
+                       progress=not args.no_progress, overrides=overrides)
+    if previous is not None:
+        report["previous"] = previous
     command = (f"python benchmarks/speed.py --scans {args.scans} --start "
                f"{' '.join(f'{s:g}' for s in args.start)} --warmup {args.warmup} "
-               f"--methods {' '.join(args.methods)}")
+               f"--methods {' '.join(args.methods)}"
+               + "".join(f" --set {k}={v}" for k, v in overrides.items())
+               + (f" --name {args.name}" if args.name != "speed" else ""))
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "speed.json").write_text(json.dumps(report, indent=1) + "\n")
-    (args.out / "speed.md").write_text(markdown(report, command))
-    print(f"wrote {args.out / 'speed.md'}")
+    (args.out / f"{args.name}.json").write_text(json.dumps(report, indent=1) + "\n")
+    (args.out / f"{args.name}.md").write_text(markdown(report, command))
+    print(f"wrote {args.out / (args.name + '.md')}")
     return 0
 
 
