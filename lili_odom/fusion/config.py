@@ -14,6 +14,7 @@ __all__ = ["LidarNoiseConfig", "FusionConfig", "ImuNoiseConfig", "WheelNoiseConf
 
 ROBUST_KERNELS = ("none", "huber", "cauchy")
 RESTRICTIONS = ("marginalize", "project")
+LIDAR_FACTORS = ("prior", "between")
 
 
 @dataclass
@@ -39,6 +40,24 @@ class LidarNoiseConfig:
             noisy axis (e.g. roll about a horseshoe tunnel's arch) silence the axes that are
             well measured; 3 keeps ~60 % weight at nominal noise and still cuts a slid
             registration (10 sigma) to ~8 %.
+        factor: how the scan-to-map registration enters the graph. ``"between"`` (default):
+            a ``BetweenFactorPose3`` from the previous fused pose with
+            ``Z = T_fused(i-1)^-1 T_icp``. When iSAM2 later moves ``X(i-1)`` the correction
+            is counted twice, and the estimate oscillates scan to scan across the tunnel
+            (``benchmarks/arc_diagnostics.py jumps``). ``"prior"`` (experimental): an absolute
+            ``PriorFactorPose3`` on the new pose (the registration measures the pose against
+            the map, which lives in the odometry frame); no oscillation, but see
+            ``anchor_sigma`` and ``benchmarks/results/fusion_factor.md``.
+        basis_snap: components of a degenerate basis row below this fraction of its largest
+            one are zeroed before the LiDAR information is restricted
+            (:func:`lili_odom.fusion.subspace.snap_basis`); 0 = use the basis as detected.
+        anchor_sigma: with ``factor="prior"`` and wheel odometry, the prior's degenerate
+            components are taken from the wheel-predicted pose and held with this sigma
+            (scaled twist units, m; :func:`lili_odom.fusion.subspace.degenerate_anchor`).
+            Without it a spurious coupling of a few hundredths in the detected basis lets
+            lateral registration noise slide the whole trajectory along the axis. The
+            reported covariance adds the wheel random walk along the subspace, which the
+            anchor would otherwise hide. 0 = no anchor.
         robust_after_updates: the kernel is off for this many updates after (re)initialisation
             or after an interval whose IMU samples reach 95 % of the sensor range (then the
             velocity is not observed or corrupt, so the IMU prediction cannot be trusted; such
@@ -53,6 +72,9 @@ class LidarNoiseConfig:
     robust_kernel: str = "cauchy"
     robust_threshold: float = 3.0
     robust_after_updates: int = 20
+    factor: str = "between"
+    anchor_sigma: float = 0.02
+    basis_snap: float = 0.0
 
     def validate(self, prefix: str = "lidar.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -70,6 +92,11 @@ class LidarNoiseConfig:
             raise ValueError(f"{prefix}robust_kernel must be one of {', '.join(ROBUST_KERNELS)}, "
                              f"got {self.robust_kernel!r}")
         check_range(prefix + "robust_threshold", self.robust_threshold, 0.0, 100.0, lo_open=True)
+        check_range(prefix + "basis_snap", self.basis_snap, 0.0, 1.0, hi_open=True)
+        check_range(prefix + "anchor_sigma", self.anchor_sigma, 0.0, 100.0, unit="m")
+        if self.factor not in LIDAR_FACTORS:
+            raise ValueError(f"{prefix}factor must be one of {', '.join(LIDAR_FACTORS)}, "
+                             f"got {self.factor!r}")
         check_range(prefix + "robust_after_updates", self.robust_after_updates, 0, 100000)
 
     def information(self) -> np.ndarray:

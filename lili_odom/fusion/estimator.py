@@ -10,14 +10,18 @@ Factors between consecutive states ``i-1 -> i``:
 
 * ``CombinedImuFactor`` from the IMU samples between the two stamps (IMU -> base_link extrinsic
   as GTSAM ``body_P_sensor``; see :mod:`lili_odom.fusion.imu`).
-* LiDAR ``BetweenFactorPose3``. The caller passes the *absolute* scan-to-map registration result
-  ``T_icp`` (base_link in the odometry frame; the map is built from fused poses). The factor's
-  measurement is the relative pose against the previous **fused** pose,
-  ``Z = T_fused(i-1)^-1 T_icp``, i.e. the map-relative correction the registration made since
-  the last fused state. Its information is the LiDAR information with the detected degenerate
-  directions removed (:mod:`lili_odom.fusion.subspace`), plus a tiny epsilon there.
-  A relative factor (rather than an absolute prior on ``X(i)``) keeps the graph consistent when
-  earlier states are re-estimated and lets the fused history stay the reference of the map.
+* LiDAR factor, from the *absolute* scan-to-map registration result ``T_icp`` (base_link in
+  the odometry frame; the map is built from fused poses). Its information is the LiDAR
+  information with the detected degenerate directions removed
+  (:mod:`lili_odom.fusion.subspace`), plus a tiny epsilon there. ``lidar.factor`` chooses
+  the form: ``"between"`` (default), a ``BetweenFactorPose3`` with the relative measurement
+  ``Z = T_fused(i-1)^-1 T_icp`` against the previous **fused** pose; or ``"prior"``
+  (experimental), a ``PriorFactorPose3`` at ``T_icp`` whose degenerate components are taken
+  from the wheel prediction (solution remapping) and held with ``lidar.anchor_sigma``. The
+  relative form counts a correction twice when iSAM2 later moves ``X(i-1)`` (the new pose
+  is dragged along and the next registration corrects it back), so the estimate oscillates
+  across the tunnel scan to scan; the absolute form does not, but is sensitive to spurious
+  components of the detected basis (see :func:`lili_odom.fusion.subspace.degenerate_anchor`).
 * Wheel ``BetweenFactorPose3`` whose information lives only inside the degenerate subspace
   (the paper's solution remapping, as a factor). Without degeneracy there is no wheel factor
   unless ``wheel_weak_scale`` > 0. The increment's distance is first divided by the wheel
@@ -71,7 +75,14 @@ from lili_odom.fusion.imu import (
     integrate,
     make_preintegration_params,
 )
-from lili_odom.fusion.subspace import split_information, sqrt_information
+from lili_odom.fusion.subspace import (
+    covariance_along,
+    degenerate_anchor,
+    inflate_along,
+    snap_basis,
+    split_information,
+    sqrt_information,
+)
 from lili_odom.fusion.wheel import WheelBuffer, wheel_information
 from lili_odom.fusion.wheel_scale import WheelScaleEstimator
 from lili_odom.geometry import exp, log, matrix, orthonormalize
@@ -226,6 +237,8 @@ class FusionEstimator:
         self._body_rate = np.zeros(6)  # (v, w) per second, base_link, previous interval
         self._kernel_holdoff = self.config.lidar.robust_after_updates
         self._consecutive_failures = 0
+        self._anchor_walk = 0.0  # wheel random-walk variance since the anchor took over [m^2]
+        self._last_meas: tuple[int, np.ndarray] | None = None  # (index, T_icp) of the last update
         self.last_output: FusionOutput | None = None
 
     # ---------------------------------------------------------------------------------------
@@ -330,7 +343,9 @@ class FusionEstimator:
         self._isam.update(graph, values)
         self._since_reset = 0
         self._history.clear()
+        self._last_meas = None
         self._body_rate = np.zeros(6)
+        self._anchor_walk = 0.0
         # the LiDAR kernel trusts the IMU prediction only once the velocity is known
         known_velocity = sigma_v <= max(cfg.prior_sigma_velocity, cfg.prior_sigma_velocity_wheel)
         self._kernel_holdoff = 0 if known_velocity else cfg.lidar.robust_after_updates
@@ -422,6 +437,8 @@ class FusionEstimator:
                 T_meas = None
                 basis = np.zeros((0, 6))
                 length = cfg.lidar.default_length
+            else:
+                basis = snap_basis(basis, cfg.lidar.basis_snap)
         omega_lidar = cfg.lidar.information()
         if lidar_information is not None:
             cand = np.asarray(lidar_information, dtype=float)
@@ -485,6 +502,20 @@ class FusionEstimator:
                 mode=cfg.lidar.restriction,
             )
 
+        # Absolute LiDAR prior: its degenerate components come from the wheel prediction
+        lidar_target, lidar_info, walk_step = T_meas, split.lidar, None
+        if (split.lidar is not None and cfg.lidar.factor == "prior" and split.dimension
+                and delta_w is not None and omega_wheel is not None
+                and cfg.lidar.anchor_sigma > 0.0):
+            lidar_target, omega_anchor = degenerate_anchor(
+                T_meas, T_prev @ delta_w, basis, length, self.T_base_lidar,
+                cfg.lidar.anchor_sigma, reference_covariance=_from_gtsam_matrix(prev.cov_gtsam))
+            lidar_info = split.lidar + omega_anchor
+            # the anchor is an absolute pseudo-measurement: the graph's marginal along the
+            # subspace stops growing, so the wheel random walk is added to the reported one
+            walk_step = float(np.linalg.eigvalsh(covariance_along(
+                np.linalg.inv(omega_wheel), basis, length, self.T_base_lidar)).max())
+
         # A graph that the IMU factor makes unsolvable (corrupt but finite samples) is retried
         # once with the no-IMU fallback before the update is given up.
         out = None
@@ -542,8 +573,7 @@ class FusionEstimator:
             # -- LiDAR and wheel factors ---------------------------------------------------------
             used_lidar = split.lidar is not None
             if used_lidar:
-                Z = np.linalg.inv(T_prev) @ T_meas
-                noise = _noise_from_information(split.lidar)
+                noise = _noise_from_information(lidar_info)
                 kernel = _robust_kernel(cfg.lidar.robust_kernel, cfg.lidar.robust_threshold)
                 # the kernel trusts the IMU prediction: not while it may be wrong (samples at
                 # the sensor's range, or a velocity not yet observed after (re)initialisation)
@@ -551,8 +581,11 @@ class FusionEstimator:
                     kernel = None
                 if kernel is not None:
                     noise = gtsam.noiseModel.Robust.Create(kernel, noise)
-                graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(orthonormalize(Z)),
-                                                   noise))
+                if cfg.lidar.factor == "prior":
+                    graph.add(gtsam.PriorFactorPose3(X(i), gtsam.Pose3(lidar_target), noise))
+                else:
+                    Z = orthonormalize(np.linalg.inv(T_prev) @ T_meas)
+                    graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(Z), noise))
             used_wheel = split.wheel is not None and delta_w is not None
             if used_wheel:
                 graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(delta_w),
@@ -582,9 +615,23 @@ class FusionEstimator:
             return None
         self.stats.n_updates += 1
         self._consecutive_failures = 0
-        if raw_wheel is not None and out.used_lidar and not len(basis) and T_meas is not None:
+        if walk_step is not None and out.used_lidar:
+            self._anchor_walk += walk_step
+            out.covariance = inflate_along(out.covariance, basis, self._anchor_walk, length,
+                                           self.T_base_lidar)
+        else:
+            self._anchor_walk = 0.0
+        lidar_delta = None
+        if cfg.lidar.factor == "between":
+            lidar_delta = np.linalg.inv(T_prev) @ T_meas if T_meas is not None else None
+        elif T_meas is not None and self._last_meas is not None and self._last_meas[0] == i - 1:
+            # consecutive registrations: the fused pose lags them by the fusion's compromise,
+            # which would bias the scale by several percent at 10 cm per scan
+            lidar_delta = np.linalg.inv(self._last_meas[1]) @ T_meas
+        self._last_meas = (i, T_meas) if T_meas is not None else None
+        if raw_wheel is not None and out.used_lidar and not len(basis) and lidar_delta is not None:
             # a fully constrained registration measured this increment: calibrate the wheels
-            self.wheel_scale.observe(raw_wheel, np.linalg.inv(T_prev) @ T_meas)
+            self.wheel_scale.observe(raw_wheel, lidar_delta)
         if dt >= 0.01:  # shorter intervals turn registration noise into absurd rates
             rate = log(np.linalg.inv(T_prev) @ out.pose) / dt
             # the constant-velocity fallback never extrapolates faster than the plausibility gates
@@ -708,6 +755,7 @@ class FusionEstimator:
         """
         self._consecutive_failures += 1
         self._body_rate = np.zeros(6)
+        self._anchor_walk = 0.0
         self._kernel_holdoff = self.config.lidar.robust_after_updates
         if self._consecutive_failures >= 3:
             prev = _State(prev.t, prev.index, prev.pose, np.zeros(3),

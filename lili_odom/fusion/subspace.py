@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lili_odom.geometry import adjoint, scaling_matrix
+from lili_odom.geometry import adjoint, exp, log, orthonormalize, scaling_matrix
 
 __all__ = [
     "SubspaceSplit",
@@ -43,6 +43,10 @@ __all__ = [
     "restrict_information",
     "split_information",
     "sqrt_information",
+    "degenerate_anchor",
+    "snap_basis",
+    "covariance_along",
+    "inflate_along",
 ]
 
 
@@ -59,6 +63,21 @@ def orthonormal_rows(basis: np.ndarray, tol: float = 1e-6) -> np.ndarray:
     _, s, vt = np.linalg.svd(basis, full_matrices=False)
     rank = int(np.count_nonzero(s > tol * max(s[0], 1e-300))) if s.size else 0
     return vt[:rank]
+
+
+def snap_basis(basis: np.ndarray, threshold: float) -> np.ndarray:
+    """Zero the components of each basis row below ``threshold`` times its largest one.
+
+    A detected direction carries small spurious components (a few hundredths in the scaled
+    space, from registration noise); under an absolute LiDAR factor they decide where along
+    the subspace the estimate settles. Rows are re-orthonormalised afterwards (a row that
+    vanishes or repeats another is dropped). ``threshold = 0`` returns the rows unchanged.
+    """
+    basis = np.asarray(basis, dtype=float).reshape(-1, 6)
+    if threshold <= 0.0 or basis.shape[0] == 0:
+        return basis
+    peak = np.abs(basis).max(axis=1, keepdims=True)
+    return orthonormal_rows(np.where(np.abs(basis) >= threshold * peak, basis, 0.0))
 
 
 def _complement(rows: np.ndarray) -> np.ndarray:
@@ -183,3 +202,80 @@ def sqrt_information(omega: np.ndarray, rel_tol: float = 1e-12) -> np.ndarray:
     top = max(float(w.max()), 0.0)
     w = np.where(w > rel_tol * top, w, 0.0)
     return (np.sqrt(w)[:, None] * v.T)
+
+
+def degenerate_anchor(
+    T_meas: np.ndarray,
+    T_ref: np.ndarray,
+    basis_scaled: np.ndarray,
+    length: float,
+    T_base_lidar: np.ndarray,
+    sigma: float,
+    reference_covariance: np.ndarray | None = None,
+    iterations: int = 3,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A registration pose whose degenerate components are taken from a reference pose.
+
+    With an *absolute* LiDAR factor and nothing but relative wheel/IMU factors along the
+    degenerate subspace, the position along it is decided by what little information the
+    restricted factor keeps near the subspace (a detected basis carries spurious components of
+    a few hundredths, which turn registration noise across the tunnel into pulls along it). On
+    the simulated tunnel that made the trajectory drift along the axis against the wheels by
+    up to metres, by amounts that changed with minor settings. Replacing the measurement's degenerate
+    components by a reference pose (the wheel prediction: Zhang & Singh's solution remapping)
+    and holding them with ``sigma`` gives that direction to the wheels.
+
+    Args:
+        T_meas: 4x4 registered pose of base_link in the odometry frame.
+        T_ref: 4x4 reference pose of base_link (e.g. previous pose composed with the wheel
+            increment).
+        basis_scaled: (k, 6) degenerate directions, scaled LiDAR body twists.
+        length: characteristic length L [m].
+        T_base_lidar: 4x4 pose of the LiDAR in base_link.
+        sigma: 1-sigma of the anchor along each degenerate direction, scaled units [m].
+        reference_covariance: 6x6 ``(v, w)`` base_link covariance of ``T_ref`` [m^2, rad^2]
+            (the previous pose's marginal); its part along the subspace is added to
+            ``sigma^2``, so the anchor never claims more than the reference knows and the
+            reported covariance along the subspace keeps growing like the wheel random walk.
+        iterations: Gauss-Newton steps making the degenerate components of
+            ``log(T_target^-1 T_ref)`` vanish (one is exact for small differences).
+
+    Returns:
+        ``(T_target, omega)``: ``T_meas`` moved along the degenerate subspace onto ``T_ref``'s
+        degenerate components, and the 6x6 ``(v, w)`` base_link information (body frame at
+        ``T_target``) supported on that subspace.
+    """
+    M = scaled_lidar_to_base(T_base_lidar, length)
+    Minv = np.linalg.inv(M)
+    deg = orthonormal_rows(basis_scaled)
+    P_base = M @ (deg.T @ deg) @ Minv  # projects base twists onto the degenerate subspace
+    T_target = orthonormalize(np.asarray(T_meas, dtype=float))
+    for _ in range(max(1, iterations)):
+        xi = log(np.linalg.inv(T_target) @ T_ref)
+        T_target = orthonormalize(T_target @ exp(P_base @ xi))
+    cov_deg = np.eye(len(deg)) * sigma**2
+    if reference_covariance is not None:
+        cov_s = Minv @ np.asarray(reference_covariance, dtype=float) @ Minv.T
+        cov_deg = cov_deg + deg @ (0.5 * (cov_s + cov_s.T)) @ deg.T
+    omega = Minv.T @ (deg.T @ np.linalg.inv(cov_deg) @ deg) @ Minv
+    return T_target, 0.5 * (omega + omega.T)
+
+
+def covariance_along(cov_base: np.ndarray, basis_scaled: np.ndarray, length: float,
+                     T_base_lidar: np.ndarray) -> np.ndarray:
+    """(k, k) covariance of a base_link ``(v, w)`` covariance along the degenerate directions
+    (scaled LiDAR coordinates, m^2)."""
+    Minv = np.linalg.inv(scaled_lidar_to_base(T_base_lidar, length))
+    deg = orthonormal_rows(basis_scaled)
+    cov_s = Minv @ np.asarray(cov_base, dtype=float) @ Minv.T
+    return deg @ (0.5 * (cov_s + cov_s.T)) @ deg.T
+
+
+def inflate_along(cov_base: np.ndarray, basis_scaled: np.ndarray, variance: float,
+                  length: float, T_base_lidar: np.ndarray) -> np.ndarray:
+    """``cov_base`` (6x6 ``(v, w)`` base_link) plus ``variance`` [m^2, scaled units] along each
+    degenerate direction."""
+    M = scaled_lidar_to_base(T_base_lidar, length)
+    deg = orthonormal_rows(basis_scaled)
+    out = np.asarray(cov_base, dtype=float) + variance * (M @ deg.T @ deg @ M.T)
+    return 0.5 * (out + out.T)

@@ -1,0 +1,74 @@
+"""The absolute LiDAR factor (``fusion.lidar.factor = "prior"``): basis snapping, the
+degenerate anchor and the covariance reported along the anchored subspace."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lili_odom.fusion import FusionConfig, FusionEstimator
+from lili_odom.fusion.config import LidarNoiseConfig
+from lili_odom.fusion.subspace import (
+    degenerate_anchor,
+    orthonormal_rows,
+    scaled_lidar_to_base,
+    snap_basis,
+)
+from lili_odom.geometry import exp, log
+from test_fusion import MOUNT, G, config, degeneracy, feed_imu, pose
+
+
+def test_snap_basis_zeroes_small_components_and_keeps_rows_orthonormal() -> None:
+    b = np.array([[1.0, 0.03, -0.02, 0.0, 0.0, 0.05], [0.0, 0.04, 1.0, 0.5, 0.0, 0.0]])
+    out = snap_basis(b, 0.1)
+    np.testing.assert_allclose(out @ out.T, np.eye(2), atol=1e-12)
+    # the span is that of the snapped rows: (1, 0, ...) and (0, 0, 1, 0.5, 0, 0)
+    expected = orthonormal_rows(np.array([[1.0, 0, 0, 0, 0, 0], [0, 0, 1.0, 0.5, 0, 0]]))
+    np.testing.assert_allclose(out.T @ out, expected.T @ expected, atol=1e-12)
+    np.testing.assert_array_equal(snap_basis(b, 0.0), b)
+    assert snap_basis(np.zeros((0, 6)), 0.1).shape == (0, 6)
+
+
+@pytest.mark.parametrize("mount", [np.eye(4), MOUNT])
+def test_anchor_takes_degenerate_components_from_the_reference(mount: np.ndarray) -> None:
+    L = 8.0
+    basis = np.array([[1.0, 0.0, 0.0, 0.0, 0.0, 0.3]])
+    basis /= np.linalg.norm(basis)
+    T_meas = exp(np.array([0.4, -0.1, 0.02, 0.01, 0.0, 0.05]))
+    T_ref = exp(np.array([0.9, 0.2, 0.0, 0.0, 0.01, -0.08]))
+    target, omega = degenerate_anchor(T_meas, T_ref, basis, L, mount, sigma=0.05)
+    Minv = np.linalg.inv(scaled_lidar_to_base(mount, L))
+    P = basis.T @ basis
+    # inside the subspace the target agrees with the reference, outside with the measurement
+    assert np.linalg.norm(P @ Minv @ log(np.linalg.inv(target) @ T_ref)) < 1e-6
+    assert np.linalg.norm((np.eye(6) - P) @ Minv @ log(np.linalg.inv(T_meas) @ target)) < 1e-6
+    # the information is rank 1 along the subspace with the requested sigma
+    s = scaled_lidar_to_base(mount, L) @ basis[0]  # base twist of the unit scaled direction
+    assert s @ omega @ s == pytest.approx(1.0 / 0.05**2, rel=1e-9)
+    assert np.linalg.matrix_rank(omega, tol=1e-6 * np.abs(omega).max()) == 1
+    # the reference's own uncertainty along the subspace weakens the anchor
+    _, weaker = degenerate_anchor(T_meas, T_ref, basis, L, mount, sigma=0.05,
+                                  reference_covariance=np.eye(6) * 0.01)
+    assert s @ weaker @ s < 0.5 * (s @ omega @ s)
+
+
+def test_prior_factor_reports_the_wheel_random_walk_along_the_axis() -> None:
+    v = np.array([1.0, 0.0, 0.0])
+    est = FusionEstimator(config(lidar=LidarNoiseConfig(factor="prior")))
+    n = 30
+    feed_imu(est, -1.0, 0.1 * n + 0.05, (0.0, 0.0, G))
+    est.initialize(0.0, velocity=v)
+    for i in range(1, n + 1):
+        out = est.update(0.1 * i, pose(t=v * 0.1 * i), degeneracy([1, 0, 0, 0, 0, 0]),
+                         wheel_delta=pose(t=v * 0.1))
+        np.testing.assert_allclose(out.pose[:3, 3], v * 0.1 * i, atol=1e-3)
+    sx, sy = np.sqrt(out.covariance[0, 0]), np.sqrt(out.covariance[1, 1])
+    # 30 wheel increments of 1 cm sigma: ~5.5 cm, not the anchor's 2 cm
+    assert 0.5 * np.sqrt(30) * 0.01 < sx < 1.5 * np.sqrt(30) * 0.01 and sx > 3 * sy
+
+
+def test_invalid_factor_is_rejected() -> None:
+    with pytest.raises(ValueError, match="lidar.factor"):
+        LidarNoiseConfig(factor="absolute").validate()
+    with pytest.raises(ValueError, match="anchor_sigma"):
+        LidarNoiseConfig(anchor_sigma=-1.0).validate()
+    FusionConfig(lidar=LidarNoiseConfig(factor="prior")).validate()
