@@ -101,7 +101,8 @@ def jumps(run_dir: Path, threshold: float) -> list[str]:
     t = t_e[1:] - t_e[0]
     edges = np.arange(0.0, t[-1] + 50.0, 50.0)
     counts = np.histogram(t[step > threshold], bins=edges)[0]
-    lines = [f"## Lateral error jumps: `{run_dir.name}` of `{run_dir.parent.name}`", "",
+    where = f"{run_dir.parent.parent.name}/{run_dir.parent.name}"
+    lines = [f"## Lateral error jumps: `{run_dir.name}` of `{where}`", "",
              f"Scan-to-scan changes of the lateral error (true body frame) above {threshold:g} m: "
              f"{int((step > threshold).sum())} of {len(step)}; median change "
              f"{np.median(step) * 100:.1f} cm, 99th percentile {np.percentile(step, 99) * 100:.1f} cm.",

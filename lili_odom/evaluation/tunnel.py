@@ -190,6 +190,8 @@ def _command(ev: TunnelEvaluation) -> str:
         parts += ["--start", f"{ev.start:g}"]
     if ev.duration:
         parts += ["--duration", f"{ev.duration:g}"]
+    if ev.config:
+        parts += ["--config", str(ev.config)]
     return " ".join(parts)
 
 
