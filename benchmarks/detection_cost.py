@@ -28,12 +28,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from lili_odom.config import load_config  # noqa: E402
+from lili_odom.config import apply_params, load_config  # noqa: E402
 from lili_odom.evaluation.runner import run_bag  # noqa: E402
 from lili_odom.sim.generator import ensure_trial_bag  # noqa: E402
 
@@ -83,26 +84,15 @@ VARIANTS = {
 }
 
 
-def _set(obj, dotted: str, value) -> None:
-    *path, leaf = dotted.split(".")
-    for part in path:
-        obj = getattr(obj, part)
-    if not hasattr(obj, leaf):
-        raise SystemExit(f"detection_cost: unknown parameter pipeline.{dotted}")
-    current = getattr(obj, leaf)
-    if isinstance(current, bool) and isinstance(value, str):
-        if value.lower() not in ("true", "false"):
-            raise SystemExit(f"detection_cost: pipeline.{dotted} must be true or false")
-        value = value.lower() == "true"
-    setattr(obj, leaf, type(current)(value))
-
-
 def one_run(bag: Path, method: str, name: str, overrides: dict, work: Path, label: str):
     config = load_config(None)
     config.pipeline.method = method
-    for key, value in {**REFERENCE, **overrides}.items():
-        _set(config.pipeline, key, value)
-    config.validate()
+    params = {f"pipeline.{k}": yaml.safe_load(v) if isinstance(v, str) else v
+              for k, v in {**REFERENCE, **overrides}.items()}
+    try:  # the node's own parameter handling: unknown names, types and ranges checked
+        apply_params(config, params)
+    except ValueError as exc:
+        raise SystemExit(f"detection_cost: {exc}") from None
     t0 = time.perf_counter()
     load0 = os.getloadavg()[0]
     run = run_bag(bag, config, work / f"{label}_{name}", progress=False)

@@ -103,22 +103,17 @@ def _rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB on Linux
 
 
-def apply_overrides(pipeline_config: Any, overrides: dict[str, str]) -> None:
-    """Set dotted parameters below ``pipeline`` (``lili.return_ratio``) from strings."""
-    for dotted, value in overrides.items():
-        *path, leaf = dotted.split(".")
-        obj = pipeline_config
-        for part in path:
-            obj = getattr(obj, part)
-        if not hasattr(obj, leaf):
-            raise SystemExit(f"speed: unknown parameter pipeline.{dotted}")
-        current = getattr(obj, leaf)
-        if isinstance(current, bool):
-            if value.lower() not in ("true", "false"):
-                raise SystemExit(f"speed: pipeline.{dotted} must be true or false")
-            setattr(obj, leaf, value.lower() == "true")
-        else:
-            setattr(obj, leaf, type(current)(value))
+def apply_overrides(config: Any, overrides: dict[str, str]) -> None:
+    """Set dotted parameters below ``pipeline`` (``lili.return_ratio``) from ``--set`` strings
+    (YAML scalars), through the node's own parameter handling (types and ranges checked)."""
+    import yaml
+
+    from lili_odom.config import apply_params
+
+    try:
+        apply_params(config, {f"pipeline.{k}": yaml.safe_load(v) for k, v in overrides.items()})
+    except ValueError as exc:
+        raise SystemExit(f"speed: {exc}") from None
 
 
 def run_method(bag: Path | str, method: str, start: float, scans: int, warmup: int,
@@ -137,7 +132,7 @@ def run_method(bag: Path | str, method: str, start: float, scans: int, warmup: i
     config = load_config(None)
     if method != "kiss":
         config.pipeline.method = method
-        apply_overrides(config.pipeline, overrides or {})
+        apply_overrides(config, overrides or {})
     config.validate()
     sm = config.pipeline.scan_matcher
     topics = [config.lidar_topic, config.imu_topic, config.wheel_topic]
