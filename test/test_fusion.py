@@ -437,3 +437,28 @@ def test_random_garbage_never_raises_and_recovers(seed: int) -> None:
     feed_imu(est, t, t + 1.0, (0.0, 0.0, G))
     ok = [est.update(t + 0.1 * k, est.last_output.pose) for k in range(1, 6)]
     assert all(o is not None and o.used_imu for o in ok)
+
+
+@pytest.mark.parametrize("factor", ["between", "prior"])
+def test_accelerometer_bias_recovered_while_driving_a_degenerate_axis(factor: str) -> None:
+    """Level start, constant accelerometer bias, 1 m/s along x with x degenerate (wheels there):
+    the LiDAR holds the other directions, so the bias must be found, not absorbed elsewhere."""
+    bias = np.array([-0.027, -0.081, 0.0])
+    cfg = config(gravity_align=False)
+    cfg.lidar.factor = factor
+    est = FusionEstimator(cfg)
+    feed_imu(est, -1.0, 0.0, (bias + [0, 0, G]).tolist())
+    for k in range(-10, 1):
+        est.add_wheel(0.1 * k, pose(t=(0.1 * k, 0, 0)))
+    est.update(0.0, pose())
+    out = None
+    for k in range(1, 201):
+        t = 0.1 * k
+        feed_imu(est, t - 0.09, t, (bias + [0, 0, G]).tolist())
+        est.add_wheel(t - 0.05, pose(t=(t - 0.05, 0, 0)))
+        est.add_wheel(t, pose(t=(t, 0, 0)))
+        out = est.update(t, pose(t=(t, 0, 0)), degeneracy([1, 0, 0, 0, 0, 0]))
+        assert out is not None
+    assert np.allclose(out.accel_bias[:2], bias[:2], atol=0.01), out.accel_bias
+    assert abs(out.velocity[1]) < 0.01 and abs(out.velocity[0] - 1.0) < 0.01, out.velocity
+    assert abs(out.pose[0, 3] - 20.0) < 0.05 and abs(out.pose[1, 3]) < 0.01
