@@ -28,13 +28,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from lili_odom.config import apply_params, load_config  # noqa: E402
+from lili_odom.config import apply_overrides, load_config  # noqa: E402
 from lili_odom.evaluation.runner import run_bag  # noqa: E402
 from lili_odom.sim.generator import ensure_trial_bag  # noqa: E402
 
@@ -87,10 +86,8 @@ VARIANTS = {
 def one_run(bag: Path, method: str, name: str, overrides: dict, work: Path, label: str):
     config = load_config(None)
     config.pipeline.method = method
-    params = {f"pipeline.{k}": yaml.safe_load(v) if isinstance(v, str) else v
-              for k, v in {**REFERENCE, **overrides}.items()}
     try:  # the node's own parameter handling: unknown names, types and ranges checked
-        apply_params(config, params)
+        apply_overrides(config, {**REFERENCE, **overrides})
     except ValueError as exc:
         raise SystemExit(f"detection_cost: {exc}") from None
     t0 = time.perf_counter()

@@ -21,7 +21,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import yaml
 from tqdm import tqdm
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -29,7 +28,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from lili_odom.bagio.reader import BagReader  # noqa: E402
-from lili_odom.config import NodeConfig, apply_params  # noqa: E402
+from lili_odom.config import NodeConfig, apply_overrides  # noqa: E402
 from lili_odom.pipeline.feeder import MessageFeeder  # noqa: E402
 from lili_odom.pipeline.odometry import OdometryPipeline  # noqa: E402
 from lili_odom.sim.generator import SimRequest, Simulation, ensure_trial_bag  # noqa: E402
@@ -61,12 +60,10 @@ def main(argv: list[str] | None = None) -> int:
     bag = ensure_trial_bag(1, ROOT / "data" / "sim", resolution=(rows, cols), seed=args.seed,
                            progress=not args.no_progress)
     cfg = NodeConfig()
-    params = {"pipeline.method": args.method}
-    for kv in args.set:
-        key, _, value = kv.partition("=")
-        params["pipeline." + key.strip()] = yaml.safe_load(value.strip())
+    overrides = {"method": args.method}
+    overrides.update(kv.split("=", 1) if "=" in kv else (kv, "") for kv in args.set)
     try:
-        apply_params(cfg, params)
+        apply_overrides(cfg, overrides)
     except ValueError as exc:
         print(f"imu_consistency: {exc}", file=sys.stderr)
         return 2

@@ -104,14 +104,11 @@ def _rss_mb() -> float:
 
 
 def apply_overrides(config: Any, overrides: dict[str, str]) -> None:
-    """Set dotted parameters below ``pipeline`` (``lili.return_ratio``) from ``--set`` strings
-    (YAML scalars), through the node's own parameter handling (types and ranges checked)."""
-    import yaml
-
-    from lili_odom.config import apply_params
+    """``--set`` overrides through the node's own parameter handling (types, ranges checked)."""
+    from lili_odom.config import apply_overrides as apply
 
     try:
-        apply_params(config, {f"pipeline.{k}": yaml.safe_load(v) for k, v in overrides.items()})
+        apply(config, overrides)
     except ValueError as exc:
         raise SystemExit(f"speed: {exc}") from None
 

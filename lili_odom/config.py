@@ -268,6 +268,16 @@ def apply_params(config: NodeConfig, params: dict[str, Any]) -> NodeConfig:
     return config
 
 
+def apply_overrides(config: NodeConfig, overrides: dict[str, Any],
+                    prefix: str = "pipeline.") -> NodeConfig:
+    """``apply_params`` for command-line style overrides: names below ``prefix`` (e.g.
+    ``lili.return_ratio``), string values read as YAML scalars (``"0.1"``, ``"false"``)."""
+    import yaml
+
+    return apply_params(config, {prefix + k.strip(): yaml.safe_load(v) if isinstance(v, str) else v
+                                 for k, v in overrides.items()})
+
+
 def _flatten_mapping(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, value in data.items():

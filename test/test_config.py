@@ -59,3 +59,16 @@ def test_valid_override_applies():
                                       "extrinsics.base_to_sensor": [0, 0, 1.0, 0, 0, 0]})
     assert cfg.pipeline.method == "none" and cfg.pipeline.lili.k == 4
     assert cfg.pipeline.fusion.T_base_lidar[2, 3] == pytest.approx(1.03618)
+
+
+def test_apply_overrides_reads_yaml_scalars_below_the_prefix() -> None:
+    from lili_odom.config import NodeConfig, apply_overrides
+
+    cfg = apply_overrides(NodeConfig(), {"lili.return_ratio": "0.1", "fusion.use_imu": "false",
+                                         "method": "zhang"})
+    assert cfg.pipeline.lili.return_ratio == 0.1 and cfg.pipeline.fusion.use_imu is False
+    assert cfg.pipeline.method == "zhang"
+    with pytest.raises(ValueError, match="pipeline.lili.bogus"):
+        apply_overrides(NodeConfig(), {"lili.bogus": "1"})
+    with pytest.raises(ValueError, match="return_ratio"):
+        apply_overrides(NodeConfig(), {"lili.return_ratio": "2.0"})

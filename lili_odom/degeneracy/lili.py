@@ -37,8 +37,9 @@ runs come back: their registration returns to ``P_opt`` and step 4 rejects their
 below ``return_ratio``, checked every ``return_check_iterations`` ICP iterations (KISS-ICP's
 iterations are stateless, so continuing from the pose reached is the same ICP up to rounding);
 runs that do not come back (degenerate directions) run to convergence as before.
-``benchmarks/detection_cost.py`` finds the detected subspace as close to the paper's as the detector is to itself from scan to scan along the
-tunnel, and ``benchmarks/speed.py`` the time (README, Speed). It is not the default:
+``benchmarks/detection_cost.py`` finds the detected subspace as close to the paper's as the
+detector is to itself from scan to scan along the tunnel, and ``benchmarks/speed.py`` the
+time (README, Speed). It is not the default:
 on sparse 32 x 256 scans a run can dip below 0.1 and slide out again, and the short
 featureless scenario of ``test/test_degenerate_odometry.py`` is decided by such details.
 The opt-in ``perturbation_points`` / ``perturbation_iterations`` / ``both_signs=False`` make

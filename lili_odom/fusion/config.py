@@ -47,15 +47,16 @@ class LidarNoiseConfig:
             (``benchmarks/arc_diagnostics.py jumps``). ``"prior"`` (experimental): an absolute
             ``PriorFactorPose3`` on the new pose (the registration measures the pose against
             the map, which lives in the odometry frame); no oscillation, but see
-            ``anchor_sigma`` and ``benchmarks/results/fusion_factor.md``.
+            ``anchor_sigma`` and ``benchmarks/results/prior_factor/tunnel.md``.
         basis_snap: components of a degenerate basis row below this fraction of its largest
             one are zeroed before the LiDAR information is restricted
             (:func:`lili_odom.fusion.subspace.snap_basis`); 0 = use the basis as detected.
         anchor_sigma: with ``factor="prior"`` and wheel odometry, the prior's degenerate
             components are taken from the wheel-predicted pose and held with this sigma
             (scaled twist units, m; :func:`lili_odom.fusion.subspace.degenerate_anchor`).
-            Without it a spurious coupling of a few hundredths in the detected basis lets
-            lateral registration noise slide the whole trajectory along the axis. The
+            Without it the position along the axis drifted against the wheels in the
+            simulated tunnel (suspected cause: small spurious components of the detected
+            basis, not confirmed in a synthetic test). The
             reported covariance adds the wheel random walk along the subspace, which the
             anchor would otherwise hide. 0 = no anchor.
         robust_after_updates: the kernel is off for this many updates after (re)initialisation

@@ -218,10 +218,9 @@ def degenerate_anchor(
 
     With an *absolute* LiDAR factor and nothing but relative wheel/IMU factors along the
     degenerate subspace, the position along it is decided by what little information the
-    restricted factor keeps near the subspace (a detected basis carries spurious components of
-    a few hundredths, which turn registration noise across the tunnel into pulls along it). On
-    the simulated tunnel that made the trajectory drift along the axis against the wheels by
-    up to metres, by amounts that changed with minor settings. Replacing the measurement's degenerate
+    restricted factor keeps near the subspace. On the simulated tunnel the trajectory drifted
+    along the axis against the wheels, by amounts that changed with minor settings (suspected:
+    spurious components of the detected basis). Replacing the measurement's degenerate
     components by a reference pose (the wheel prediction: Zhang & Singh's solution remapping)
     and holding them with ``sigma`` gives that direction to the wheels.
 
@@ -255,8 +254,7 @@ def degenerate_anchor(
         T_target = orthonormalize(T_target @ exp(P_base @ xi))
     cov_deg = np.eye(len(deg)) * sigma**2
     if reference_covariance is not None:
-        cov_s = Minv @ np.asarray(reference_covariance, dtype=float) @ Minv.T
-        cov_deg = cov_deg + deg @ (0.5 * (cov_s + cov_s.T)) @ deg.T
+        cov_deg = cov_deg + covariance_along(reference_covariance, deg, length, T_base_lidar)
     omega = Minv.T @ (deg.T @ np.linalg.inv(cov_deg) @ deg) @ Minv
     return T_target, 0.5 * (omega + omega.T)
 
