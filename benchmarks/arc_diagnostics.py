@@ -2,6 +2,7 @@
 
     python benchmarks/arc_diagnostics.py probe --times 60 130 150 200 250 300
     python benchmarks/arc_diagnostics.py jumps data/tunnel_runs/trial1_64x512_seed0/lili
+    python benchmarks/arc_diagnostics.py errors data/tunnel_runs/trial1_64x512_seed0/lili
 
 ``probe`` runs LiLi on simulated Trial 1 scans registered against a local map built from the
 *true* poses (the previous ``--history`` seconds of scans, each column placed with its true
@@ -15,7 +16,11 @@ directory and counts scan-to-scan changes of the lateral position error (in the 
 frame) above ``--threshold``: a registration that is stable to centimetres cannot produce
 them, an estimator that oscillates does.
 
-Both append a section to ``benchmarks/results/arc_diagnostics.md`` (``--out`` to change).
+``errors`` tabulates the error of such a run by component (along the tunnel, lateral,
+vertical, roll, pitch, yaw) in the true body frame, without alignment: slow drift and sudden
+failures look different there, and so do along-axis (wheel) and lateral/yaw (LiDAR) errors.
+
+All three append a section to ``benchmarks/results/arc_diagnostics.md`` (``--out`` to change).
 """
 from __future__ import annotations
 
@@ -83,7 +88,9 @@ def probe(times: list[float], resolution: tuple[int, int], history: float) -> li
     return lines + [""]
 
 
-def jumps(run_dir: Path, threshold: float) -> list[str]:
+def _errors_in_true_body_frame(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps from the first estimate [s], (n, 4, 4) errors ``T_true^-1 T_est``), both
+    trajectories started at the same pose (no alignment), associated as the metrics do."""
     from evo.core import sync
     from evo.core.trajectory import PoseTrajectory3D
 
@@ -96,13 +103,39 @@ def jumps(run_dir: Path, threshold: float) -> list[str]:
     t_e = np.asarray(est.timestamps)
     align = T_g[0] @ np.linalg.inv(T_e[0])  # both start at the same pose
     err = np.einsum("nij,njk->nik", np.linalg.inv(T_g), align @ T_e)
+    return t_e - t_e[0], err
+
+
+def _run_name(run_dir: Path) -> str:
+    return f"`{run_dir.name}` of `{run_dir.parent.parent.name}/{run_dir.parent.name}`"
+
+
+def errors(run_dir: Path, period: float) -> list[str]:
+    """Error of the estimate by component, in the true body frame, every ``period`` s."""
+    t, err = _errors_in_true_body_frame(run_dir)
+    rot = np.degrees([geometry.log(E)[3:] for E in err])
+    lines = [f"## Error by component: {_run_name(run_dir)}", "",
+             "Estimate against truth, both started at the same pose (no alignment); position "
+             "error in the true base_link frame (x along the tunnel), rotation error as the "
+             "rotation vector of `T_true^-1 T_est`.", "",
+             "| t [s] | along x [m] | lateral y [m] | vertical z [m] | roll [deg] | pitch [deg] "
+             "| yaw [deg] |", "|---|---|---|---|---|---|---|"]
+    for tq in [*np.arange(0.0, t[-1], period), t[-1]]:
+        i = int(np.argmin(np.abs(t - tq)))
+        lines.append(f"| {t[i]:.0f} | " + " | ".join(f"{v:+.2f}" for v in
+                                                     (*err[i, :3, 3], *rot[i])) + " |")
+    print("\n".join(lines))
+    return lines + [""]
+
+
+def jumps(run_dir: Path, threshold: float) -> list[str]:
+    t_all, err = _errors_in_true_body_frame(run_dir)
     lateral = err[:, 1, 3]
     step = np.abs(np.diff(lateral))
-    t = t_e[1:] - t_e[0]
+    t = t_all[1:]
     edges = np.arange(0.0, t[-1] + 50.0, 50.0)
     counts = np.histogram(t[step > threshold], bins=edges)[0]
-    where = f"{run_dir.parent.parent.name}/{run_dir.parent.name}"
-    lines = [f"## Lateral error jumps: `{run_dir.name}` of `{where}`", "",
+    lines = [f"## Lateral error jumps: {_run_name(run_dir)}", "",
              f"Scan-to-scan changes of the lateral error (true body frame) above {threshold:g} m: "
              f"{int((step > threshold).sum())} of {len(step)}; median change "
              f"{np.median(step) * 100:.1f} cm, 99th percentile {np.percentile(step, 99) * 100:.1f} cm.",
@@ -122,7 +155,10 @@ def main(argv: list[str] | None = None) -> int:
     j = sub.add_parser("jumps", help="lateral error jumps of a run directory")
     j.add_argument("run_dir", type=Path)
     j.add_argument("--threshold", type=float, default=0.05, help="[m]")
-    for q in (p, j):
+    e = sub.add_parser("errors", help="error by component of a run directory")
+    e.add_argument("run_dir", type=Path)
+    e.add_argument("--period", type=float, default=20.0, help="table row every N s")
+    for q in (p, j, e):
         q.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
     if args.command == "probe":
@@ -132,7 +168,8 @@ def main(argv: list[str] | None = None) -> int:
         if not (args.run_dir / "estimate.tum").exists() or not (args.run_dir / "truth.tum").exists():
             print(f"error: {args.run_dir}: needs estimate.tum and truth.tum", file=sys.stderr)
             return 2
-        lines = jumps(args.run_dir, args.threshold)
+        lines = (jumps(args.run_dir, args.threshold) if args.command == "jumps"
+                 else errors(args.run_dir, args.period))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     header = "" if args.out.exists() else (
         "# Tunnel diagnostics\n\nProduced by `benchmarks/arc_diagnostics.py` "

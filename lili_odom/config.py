@@ -148,6 +148,7 @@ PARAMETER_RANGES: dict[str, tuple] = {
     "pipeline.detection_points": (0, 10**7, False, False, ""),
     "pipeline.sensor_wait_s": (0.0, 10.0, False, False, "s"),
     "pipeline.max_pending_scans": (1, 100, False, False, ""),
+    "pipeline.remap_iterations": (0, 100, False, False, ""),
     "pipeline.scan_matcher.max_range": (0.0, 1000.0, True, False, "m"),
     "pipeline.scan_matcher.min_range": (0.0, 1000.0, False, True, "m"),
     "pipeline.scan_matcher.voxel_size": (0.0, 100.0, False, False, "m"),

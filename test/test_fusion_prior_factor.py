@@ -72,3 +72,28 @@ def test_invalid_factor_is_rejected() -> None:
     with pytest.raises(ValueError, match="anchor_sigma"):
         LidarNoiseConfig(anchor_sigma=-1.0).validate()
     FusionConfig(lidar=LidarNoiseConfig(factor="prior")).validate()
+
+
+def test_hybrid_factor_is_absolute_in_translation_and_relative_in_tilt() -> None:
+    """A local map tilted 1 deg against gravity and 5 cm to the side (every registration
+    carries both): the absolute factor pins the pitch to the map's; the hybrid factor measures
+    roll and pitch only relative to the previous fused pose, which the IMU's gravity also
+    holds, so it follows the map's tilt less. Across the axis both follow the map."""
+    v = np.array([1.0, 0.0, 0.0])
+    tilt = np.radians(1.0)
+    R_map = exp(np.array([0.0, 0.0, 0.0, 0.0, tilt, 0.0]))[:3, :3]
+    offset = np.array([0.0, 0.05, 0.0])
+    pitch = {}
+    for factor in ("prior", "hybrid"):
+        est = FusionEstimator(config(lidar=LidarNoiseConfig(factor=factor, anchor_sigma=0.0)))
+        n = 50
+        feed_imu(est, -1.0, 0.1 * n + 0.05, (0.0, 0.0, G))  # level, constant velocity
+        est.initialize(0.0, velocity=v)
+        for i in range(1, n + 1):
+            out = est.update(0.1 * i, pose(R=R_map, t=v * 0.1 * i + offset),
+                             degeneracy([1, 0, 0, 0, 0, 0]), wheel_delta=pose(t=v * 0.1))
+        pitch[factor] = log(out.pose)[4]
+        assert out.pose[1, 3] == pytest.approx(0.05, abs=0.01)
+        assert out.pose[0, 3] == pytest.approx(5.0, abs=0.05)  # the wheels along the axis
+    assert pitch["prior"] > 0.9 * tilt
+    assert pitch["hybrid"] < pitch["prior"] - 0.2 * tilt

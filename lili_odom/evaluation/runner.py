@@ -29,7 +29,7 @@ from lili_odom.errors import UserError
 
 log = logging.getLogger(__name__)
 
-STAGES = ("predict", "deskew", "icp", "detector", "fusion", "map", "total")
+STAGES = ("predict", "deskew", "icp", "detector", "remap", "fusion", "map", "total")
 
 
 @dataclass

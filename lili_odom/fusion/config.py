@@ -14,7 +14,7 @@ __all__ = ["LidarNoiseConfig", "FusionConfig", "ImuNoiseConfig", "WheelNoiseConf
 
 ROBUST_KERNELS = ("none", "huber", "cauchy")
 RESTRICTIONS = ("marginalize", "project")
-LIDAR_FACTORS = ("prior", "between")
+LIDAR_FACTORS = ("prior", "between", "hybrid")
 
 
 @dataclass
@@ -47,7 +47,14 @@ class LidarNoiseConfig:
             (``benchmarks/arc_diagnostics.py jumps``). ``"prior"`` (experimental): an absolute
             ``PriorFactorPose3`` on the new pose (the registration measures the pose against
             the map, which lives in the odometry frame); no oscillation, but see
-            ``anchor_sigma`` and ``benchmarks/results/prior_factor/tunnel.md``.
+            ``anchor_sigma`` and ``benchmarks/results/prior_factor/tunnel.md``. ``"hybrid"``
+            (experimental, ``config/experimental_hybrid_factor.yaml``): the prior for
+            translation and yaw, the between factor for roll and pitch (each with the
+            information restricted to those directions). With solution remapping
+            (``pipeline.remap_iterations``) it gave the best Trial 1 figures
+            (``benchmarks/results/lidar_factor.md``); why the relative tilt matters there
+            is not established (suspected: the prior pins the tilt to the local map's, and
+            the IMU's gravity projection turns a tilt error into velocity along the axis).
         basis_snap: components of a degenerate basis row below this fraction of its largest
             one are zeroed before the LiDAR information is restricted
             (:func:`lili_odom.fusion.subspace.snap_basis`); 0 = use the basis as detected.

@@ -21,7 +21,10 @@ Factors between consecutive states ``i-1 -> i``:
   relative form counts a correction twice when iSAM2 later moves ``X(i-1)`` (the new pose
   is dragged along and the next registration corrects it back), so the estimate oscillates
   across the tunnel scan to scan; the absolute form does not, but is sensitive to spurious
-  components of the detected basis (see :func:`lili_odom.fusion.subspace.degenerate_anchor`).
+  components of the detected basis (see :func:`lili_odom.fusion.subspace.degenerate_anchor`
+  and solution remapping, :mod:`lili_odom.pipeline.remap`). ``"hybrid"`` (experimental)
+  adds the prior restricted to translation and yaw and the between factor restricted to roll
+  and pitch.
 * Wheel ``BetweenFactorPose3`` whose information lives only inside the degenerate subspace
   (the paper's solution remapping, as a factor). Without degeneracy there is no wheel factor
   unless ``wheel_weak_scale`` > 0. The increment's distance is first divided by the wheel
@@ -79,6 +82,7 @@ from lili_odom.fusion.subspace import (
     covariance_along,
     degenerate_anchor,
     inflate_along,
+    restrict_information,
     snap_basis,
     split_information,
     sqrt_information,
@@ -88,6 +92,10 @@ from lili_odom.fusion.wheel_scale import WheelScaleEstimator
 from lili_odom.geometry import exp, log, matrix, orthonormalize
 
 __all__ = ["FusionEstimator", "FusionOutput", "FusionStats"]
+
+# base_link roll and pitch (rows of the (v, w) identity) and the other four directions
+_TILT = np.eye(6)[[3, 4]]
+_NOT_TILT = np.eye(6)[[0, 1, 2, 5]]
 
 # (v, w) <-> (w, v) permutation for 6x6 matrices.
 _SWAP = np.block([[np.zeros((3, 3)), np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
@@ -504,7 +512,7 @@ class FusionEstimator:
 
         # Absolute LiDAR prior: its degenerate components come from the wheel prediction
         lidar_target, lidar_info, walk_step = T_meas, split.lidar, None
-        if (split.lidar is not None and cfg.lidar.factor == "prior" and split.dimension
+        if (split.lidar is not None and cfg.lidar.factor != "between" and split.dimension
                 and delta_w is not None and omega_wheel is not None
                 and cfg.lidar.anchor_sigma > 0.0):
             lidar_target, omega_anchor = degenerate_anchor(
@@ -583,6 +591,18 @@ class FusionEstimator:
                     noise = gtsam.noiseModel.Robust.Create(kernel, noise)
                 if cfg.lidar.factor == "prior":
                     graph.add(gtsam.PriorFactorPose3(X(i), gtsam.Pose3(lidar_target), noise))
+                elif cfg.lidar.factor == "hybrid":
+                    # absolute in translation and yaw, relative to X(i-1) in roll and pitch
+                    Z = orthonormalize(np.linalg.inv(T_prev) @ T_meas)
+                    for info, factor in (
+                            (restrict_information(lidar_info, _NOT_TILT, _TILT),
+                             lambda n: gtsam.PriorFactorPose3(X(i), gtsam.Pose3(lidar_target), n)),
+                            (restrict_information(lidar_info, _TILT, _NOT_TILT),
+                             lambda n: gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(Z), n))):
+                        part = _noise_from_information(info)
+                        if kernel is not None:
+                            part = gtsam.noiseModel.Robust.Create(kernel, part)
+                        graph.add(factor(part))
                 else:
                     Z = orthonormalize(np.linalg.inv(T_prev) @ T_meas)
                     graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(Z), noise))
@@ -780,6 +800,22 @@ class FusionEstimator:
         """
         out = self.predict_poses([t])
         return None if out is None else out[0]
+
+    def wheel_prediction(self, t: float) -> np.ndarray | None:
+        """Pose of base_link (4x4, odometry frame) at ``t`` [s]: the newest fused pose moved by
+        the (scale-corrected) wheel increment since it; None without wheel data or state.
+
+        Unlike :meth:`predict` it does not depend on the fused velocity, so a measurement
+        built from it (solution remapping) cannot confirm a velocity error back to the state.
+        """
+        s = self._state
+        if s is None or not t > s.t:
+            return None
+        delta = self.wheels.delta(s.t, t)
+        delta = _as_pose(delta) if delta is not None else None
+        if delta is None or not self._plausible(delta, t - s.t):
+            return None
+        return matrix(s.pose) @ self.wheel_scale.correct(delta)
 
     def predict_poses(self, times: Iterable[float]) -> np.ndarray | None:
         """Poses (n, 4, 4) at many stamps with one IMU integration pass (for deskewing).

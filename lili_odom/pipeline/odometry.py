@@ -35,6 +35,7 @@ from lili_odom.errors import ThrottledWarnings
 from lili_odom.fusion.config import FusionConfig
 from lili_odom.fusion.estimator import FusionEstimator
 from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionScheduleConfig
+from lili_odom.pipeline.remap import constrained_registration
 from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig
 from lili_odom.pipeline.types import ImuSample, OdometryOutput, Scan, WheelSample
 
@@ -63,6 +64,14 @@ class PipelineConfig:
             oldest is processed with what there is.
         detection_schedule: when a recent detection is carried over instead of running the
             detector again (:mod:`lili_odom.pipeline.detection_schedule`).
+        remap_iterations: on a degenerate scan, the registration is re-run held at the wheel
+            prediction along the degenerate subspace (solution remapping,
+            :mod:`lili_odom.pipeline.remap`) for at most this many single ICP iterations, and
+            that pose is what the LiDAR factor measures; 0 (default) = the unconstrained
+            registration. Needed by an absolute LiDAR factor (``fusion.lidar.factor``
+            ``hybrid`` or ``prior``): without it the registration's slide along the axis
+            leaks into the kept components and pins the axial position to the slide
+            (``benchmarks/lidar_factor.py``).
         scan_matcher / fusion / lili / zhang / hessian: the stages' own configurations.
     """
 
@@ -74,6 +83,7 @@ class PipelineConfig:
     detection_points: int = 4000
     sensor_wait_s: float = 0.3
     max_pending_scans: int = 3
+    remap_iterations: int = 0
     detection_schedule: DetectionScheduleConfig = field(default_factory=DetectionScheduleConfig)
     scan_matcher: ScanMatcherConfig = field(default_factory=ScanMatcherConfig)
     fusion: FusionConfig = field(default_factory=FusionConfig)
@@ -96,6 +106,8 @@ class PipelineConfig:
             raise ValueError(f"sensor_wait_s must be in [0, 10] s, got {self.sensor_wait_s}")
         if not 1 <= self.max_pending_scans <= 100:
             raise ValueError(f"max_pending_scans must be in [1, 100], got {self.max_pending_scans}")
+        if not 0 <= self.remap_iterations <= 100:
+            raise ValueError(f"remap_iterations must be in [0, 100], got {self.remap_iterations}")
         self.detection_schedule.validate()
         self.scan_matcher.validate()
         self.lili.validate()
@@ -318,13 +330,30 @@ class OdometryPipeline:
         timings["detector"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
+        measured = reg.pose
+        if (self.config.remap_iterations and degeneracy is not None and degeneracy.ok
+                and degeneracy.degenerate):
+            # the wheels' prediction where there is one: the IMU prediction carries the fused
+            # velocity, which a measurement held at it would only confirm
+            wheel = est.wheel_prediction(t_ref)
+            reference = guess if wheel is None else wheel @ T_bl
+            remapped = constrained_registration(
+                lambda pose: self._matcher.step(source, pose), reg.pose, reference,
+                degeneracy.basis_scaled, degeneracy.characteristic_length,
+                self.config.remap_iterations)
+            measured = remapped.pose
+            if not remapped.ok:
+                self.counters["remap_failures"] += 1
+        timings["remap"] = time.perf_counter() - t0
+
+        t0 = time.perf_counter()
         if first and reinit_pose is not None:
             start = reg.pose @ np.linalg.inv(T_bl) if reg.ok else reinit_pose
             fused = est.initialize(t_ref, pose=start)
         elif first:
             fused = est.last_output
         else:
-            T_icp_base = reg.pose @ np.linalg.inv(T_bl) if reg.ok else None
+            T_icp_base = measured @ np.linalg.inv(T_bl) if reg.ok else None
             fused = est.update(t_ref, T_icp_base, degeneracy)
         timings["fusion"] = time.perf_counter() - t0
         if fused is None:

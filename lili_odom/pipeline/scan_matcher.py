@@ -86,6 +86,7 @@ class ScanMatcher:
         self._kiss_config = kiss
         self._preprocessor = Preprocessor(c.max_range, c.min_range, c.deskew, c.max_threads)
         self._registration = GuardedRegistration(c.max_iterations, c.convergence, c.max_threads)
+        self._single_step = GuardedRegistration(1, c.convergence, c.max_threads)
         self.reset()
 
     def reset(self) -> None:
@@ -138,6 +139,15 @@ class ScanMatcher:
         sigma = float(self._threshold.get_threshold())
         result = self._registration.align(source, self.reference, guess, 3.0 * sigma, sigma)
         return result
+
+    def step(self, source: np.ndarray, pose: np.ndarray) -> np.ndarray | None:
+        """One ICP iteration (re-association and update) of ``source`` from ``pose``
+        (``T_odom_lidar``) with the registration's gate; None when it failed."""
+        if self.map_empty:
+            return None
+        sigma = float(self._threshold.get_threshold())
+        result = self._single_step.align(source, self.reference, pose, 3.0 * sigma, sigma)
+        return result.pose if result.ok else None
 
     @property
     def threshold(self) -> float:
