@@ -52,8 +52,9 @@ class LidarNoiseConfig:
             translation and yaw, the between factor for roll and pitch (each with the
             information restricted to those directions). With solution remapping
             (``pipeline.remap_iterations``) it gave the best Trial 1 figures
-            (``benchmarks/results/lidar_factor.md``); why the relative tilt matters there
-            is not established (suspected: the prior pins the tilt to the local map's, and
+            (``benchmarks/results/lidar_factor.md``) but drifted along the axis on Trial 2
+            (``benchmarks/results/hybrid_factor/tunnel.md``); why the relative tilt matters
+            on Trial 1 is not established (suspected: the prior pins the tilt to the local map's, and
             the IMU's gravity projection turns a tilt error into velocity along the axis).
         basis_snap: components of a degenerate basis row below this fraction of its largest
             one are zeroed before the LiDAR information is restricted
