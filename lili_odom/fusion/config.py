@@ -54,8 +54,9 @@ class LidarNoiseConfig:
             (``pipeline.remap_iterations``) it gave the best Trial 1 figures
             (``benchmarks/results/lidar_factor.md``) but drifted along the axis on Trial 2
             (``benchmarks/results/hybrid_factor/tunnel.md``); why the relative tilt matters
-            on Trial 1 is not established (suspected: the prior pins the tilt to the local map's, and
-            the IMU's gravity projection turns a tilt error into velocity along the axis).
+            on Trial 1 is not established (suspected: the prior pins the tilt to the local
+            map's, and the IMU's gravity projection turns a tilt error into velocity along
+            the axis).
         basis_snap: components of a degenerate basis row below this fraction of its largest
             one are zeroed before the LiDAR information is restricted
             (:func:`lili_odom.fusion.subspace.snap_basis`); 0 = use the basis as detected.
