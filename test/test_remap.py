@@ -6,7 +6,8 @@ import pytest
 
 from lili_odom import geometry as g
 from lili_odom.degeneracy.reference import GuardedRegistration, ReferenceMap
-from lili_odom.pipeline.remap import constrained_registration, project_out, remap_pose
+from lili_odom.fusion.subspace import remap_pose
+from lili_odom.pipeline.remap import constrained_registration, project_out
 
 L = 5.0
 

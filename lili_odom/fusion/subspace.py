@@ -43,6 +43,7 @@ __all__ = [
     "restrict_information",
     "split_information",
     "sqrt_information",
+    "remap_pose",
     "degenerate_anchor",
     "snap_basis",
     "covariance_along",
@@ -204,6 +205,26 @@ def sqrt_information(omega: np.ndarray, rel_tol: float = 1e-12) -> np.ndarray:
     return (np.sqrt(w)[:, None] * v.T)
 
 
+def remap_pose(T: np.ndarray, T_ref: np.ndarray, basis_scaled: np.ndarray, length: float,
+               iterations: int = 3) -> np.ndarray:
+    """LiDAR pose ``T`` (4x4) moved along the degenerate subspace onto ``T_ref``'s degenerate
+    components (solution remapping of a pose).
+
+    ``basis_scaled`` rows are scaled twists ``(v, L w)`` in the LiDAR body frame. Solves
+    ``B S log((T exp(xi))^-1 T_ref) = 0`` for ``xi`` in the subspace by fixed-point steps (one
+    is exact when ``T`` and ``T_ref`` differ by a motion inside the subspace).
+    """
+    B = orthonormal_rows(basis_scaled)
+    T = orthonormalize(np.asarray(T, dtype=float))
+    if B.shape[0] == 0:
+        return T
+    S = scaling_matrix(length)
+    P = np.linalg.inv(S) @ (B.T @ B) @ S  # projects plain twists onto the subspace
+    for _ in range(max(1, iterations)):
+        T = orthonormalize(T @ exp(P @ log(np.linalg.inv(T) @ T_ref)))
+    return T
+
+
 def degenerate_anchor(
     T_meas: np.ndarray,
     T_ref: np.ndarray,
@@ -244,14 +265,12 @@ def degenerate_anchor(
         degenerate components, and the 6x6 ``(v, w)`` base_link information (body frame at
         ``T_target``) supported on that subspace.
     """
-    M = scaled_lidar_to_base(T_base_lidar, length)
-    Minv = np.linalg.inv(M)
+    Minv = np.linalg.inv(scaled_lidar_to_base(T_base_lidar, length))
     deg = orthonormal_rows(basis_scaled)
-    P_base = M @ (deg.T @ deg) @ Minv  # projects base twists onto the degenerate subspace
-    T_target = orthonormalize(np.asarray(T_meas, dtype=float))
-    for _ in range(max(1, iterations)):
-        xi = log(np.linalg.inv(T_target) @ T_ref)
-        T_target = orthonormalize(T_target @ exp(P_base @ xi))
+    T_target = remap_pose(np.asarray(T_meas, dtype=float) @ T_base_lidar,
+                          np.asarray(T_ref, dtype=float) @ T_base_lidar, deg, length,
+                          iterations) @ np.linalg.inv(T_base_lidar)
+    T_target = orthonormalize(T_target)
     cov_deg = np.eye(len(deg)) * sigma**2
     if reference_covariance is not None:
         cov_deg = cov_deg + covariance_along(reference_covariance, deg, length, T_base_lidar)

@@ -29,8 +29,9 @@ import numpy as np
 from lili_odom import geometry
 from lili_odom.degeneracy.hessian import remapping_matrix_from_basis
 from lili_odom.degeneracy.subspace import orthonormal_rows
+from lili_odom.fusion.subspace import remap_pose
 
-__all__ = ["RemapResult", "project_out", "remap_pose", "constrained_registration"]
+__all__ = ["RemapResult", "project_out", "constrained_registration"]
 
 
 def project_out(xi: np.ndarray, basis_scaled: np.ndarray, length: float) -> np.ndarray:
@@ -40,23 +41,6 @@ def project_out(xi: np.ndarray, basis_scaled: np.ndarray, length: float) -> np.n
     remapping matrix, :func:`lili_odom.degeneracy.hessian.remapping_matrix_from_basis`).
     """
     return remapping_matrix_from_basis(orthonormal_rows(basis_scaled), length) @ np.asarray(xi)
-
-
-def remap_pose(T: np.ndarray, T_ref: np.ndarray, basis_scaled: np.ndarray, length: float,
-               iterations: int = 3) -> np.ndarray:
-    """``T`` moved along the degenerate subspace onto ``T_ref``'s degenerate components.
-
-    Solves ``B S log((T exp(xi))^-1 T_ref) = 0`` for ``xi`` in the subspace by fixed-point
-    steps (one is exact when ``T`` and ``T_ref`` differ by a motion inside the subspace).
-    """
-    B = orthonormal_rows(basis_scaled)
-    T = geometry.orthonormalize(np.asarray(T, dtype=float))
-    if B.shape[0] == 0:
-        return T
-    for _ in range(max(1, iterations)):
-        s = geometry.scale_twist(geometry.log(np.linalg.inv(T) @ T_ref), length)
-        T = geometry.orthonormalize(T @ geometry.exp(geometry.unscale_twist(B.T @ (B @ s), length)))
-    return T
 
 
 @dataclass
