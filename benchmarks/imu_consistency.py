@@ -2,12 +2,15 @@
 
     python benchmarks/imu_consistency.py                      # Trial 1, 64x512, first 200 s
     python benchmarks/imu_consistency.py --set fusion.lidar.factor=prior
+    python benchmarks/imu_consistency.py --trial 2 --duration 240 --set fusion.lidar.factor=hybrid \
+        --set remap_iterations=10 --name imu_consistency_t2_hybrid
 
 Runs the odometry (``lili`` unless ``--method``) over simulated Trial 1 and samples, every
 ``--every`` seconds: the fused velocity state of base_link in base_link axes [m/s], the
 velocity implied by the fused poses (their displacement over the last second, same axes), and
 the estimated accelerometer bias against the simulator's true bias (os_imu axes [m/s^2]; the
-simulator regenerates its IMU noise from the seed, so the truth is exact). In a consistent
+simulator regenerates its IMU noise from the seed, so the truth is exact), and the online
+wheel distance scale (``fusion.wheel_scale``) against the simulator's (from the bag's sidecar). In a consistent
 estimate the two velocities agree to within noise and the bias converges towards the truth;
 a persistent difference means the IMU factor is being overruled, which is where the fusion's
 along-axis drift in the tunnel is being investigated (README, Status).
@@ -35,9 +38,10 @@ from lili_odom.sim.generator import SimRequest, Simulation, ensure_trial_bag  # 
 from lili_odom.sim.imu import simulate_imu  # noqa: E402
 
 
-def true_accel_bias(resolution: tuple[int, int], seed: int) -> tuple[np.ndarray, np.ndarray]:
+def true_accel_bias(resolution: tuple[int, int], seed: int, trial: int = 1
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """(times from the trial start [s], true accelerometer bias (N, 3) in os_imu [m/s^2])."""
-    sim = Simulation(SimRequest(world="tunnel", trial=1, seed=seed, resolution=resolution))
+    sim = Simulation(SimRequest(world="tunnel", trial=trial, seed=seed, resolution=resolution))
     imu = simulate_imu(sim.trajectory, sim.sensors.extrinsics.base_to_imu, sim.sensors.imu, seed)
     return imu.t, imu.accel_bias
 
@@ -47,6 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--duration", type=float, default=200.0, help="seconds of the trial (default 200)")
     ap.add_argument("--every", type=float, default=20.0, help="sampling period [s] (default 20)")
     ap.add_argument("--resolution", default="64x512")
+    ap.add_argument("--trial", type=int, default=1, choices=[1, 2])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--method", default="lili", choices=["none", "zhang", "hessian", "lili"])
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -57,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     rows, cols = (int(v) for v in args.resolution.lower().split("x"))
-    bag = ensure_trial_bag(1, ROOT / "data" / "sim", resolution=(rows, cols), seed=args.seed,
+    bag = ensure_trial_bag(args.trial, ROOT / "data" / "sim", resolution=(rows, cols), seed=args.seed,
                            progress=not args.no_progress)
     cfg = NodeConfig()
     overrides = {"method": args.method}
@@ -72,6 +77,7 @@ def main(argv: list[str] | None = None) -> int:
 
     samples: list[tuple[float, np.ndarray, np.ndarray]] = []  # (stamp, pose, fused velocity)
     biases: list[np.ndarray] = []
+    scales: list[float] = []
     topics = [cfg.lidar_topic, cfg.imu_topic, cfg.wheel_topic, "/tf_static"]
     t_bag0 = None
     bar = tqdm(total=args.duration, unit="s", disable=args.no_progress, desc="odometry")
@@ -86,13 +92,18 @@ def main(argv: list[str] | None = None) -> int:
                     continue
                 samples.append((out.stamp, out.pose, fused.velocity.copy()))
                 biases.append(fused.accel_bias.copy())
+                scales.append(float(out.details.get("wheel_scale", float("nan"))))
                 bar.update(max(0.0, out.stamp - t_bag0 - bar.n))
     bar.close()
     if len(samples) < 20:
         print("imu_consistency: fewer than 20 fused scans; nothing to report", file=sys.stderr)
         return 1
 
-    t_true, b_true = true_accel_bias((rows, cols), args.seed)
+    t_true, b_true = true_accel_bias((rows, cols), args.seed, args.trial)
+    try:
+        true_scale = float(json.loads(Path(str(bag) + ".json").read_text())["wheel_scale"])
+    except (OSError, KeyError, ValueError):
+        true_scale = float("nan")
     stamps = np.array([s for s, _, _ in samples])
     trial_t0 = t_bag0  # the full trial's bag starts at trial time 0
     table = []
@@ -108,24 +119,26 @@ def main(argv: list[str] | None = None) -> int:
         i = int(np.argmin(np.abs(t_true - (t_k - trial_t0))))
         table.append({"t": float(t_k - stamps[0]), "v_state": v_state.tolist(),
                       "v_poses": v_poses.tolist(), "accel_bias": biases[k].tolist(),
-                      "accel_bias_true": b_true[i].tolist()})
+                      "accel_bias_true": b_true[i].tolist(), "wheel_scale": scales[k]})
 
     args.out.mkdir(parents=True, exist_ok=True)
     command = "python benchmarks/imu_consistency.py" + "".join(
         f" {a}" for a in (argv if argv is not None else sys.argv[1:]))
     lines = [
         "# Fused IMU state against the fused poses and the simulator's truth", "",
-        f"`{command}`: simulated Trial 1 ({args.resolution}, seed {args.seed}), method "
+        f"`{command}`: simulated Trial {args.trial} ({args.resolution}, seed {args.seed}), method "
         f"`{args.method}`, first {args.duration:.0f} s. Velocities of base_link in base_link "
         "axes (x forward, y left) [m/s]: the fused state, and the fused poses' displacement over "
-        "the last second. Accelerometer bias in os_imu axes [m/s^2]: estimated and true.", "",
-        "| t [s] | v state x / y | v from poses x / y | y difference | accel bias x / y | true bias x / y |",
-        "|---|---|---|---|---|---|",
+        "the last second. Accelerometer bias in os_imu axes [m/s^2]: estimated and true. Wheel "
+        f"distance scale: estimated (the simulator's: {true_scale:.4f}).", "",
+        "| t [s] | v state x / y | v from poses x / y | y difference | accel bias x / y | true bias x / y | wheel scale |",
+        "|---|---|---|---|---|---|---|",
     ]
     for r in table:
         vs, vp, b, bt = r["v_state"], r["v_poses"], r["accel_bias"], r["accel_bias_true"]
         lines.append(f"| {r['t']:.0f} | {vs[0]:+.3f} / {vs[1]:+.3f} | {vp[0]:+.3f} / {vp[1]:+.3f} "
-                     f"| {vs[1] - vp[1]:+.3f} | {b[0]:+.3f} / {b[1]:+.3f} | {bt[0]:+.3f} / {bt[1]:+.3f} |")
+                     f"| {vs[1] - vp[1]:+.3f} | {b[0]:+.3f} / {b[1]:+.3f} | {bt[0]:+.3f} / {bt[1]:+.3f} "
+                     f"| {r['wheel_scale']:.4f} |")
     dy = np.array([r["v_state"][1] - r["v_poses"][1] for r in table])
     eb = np.array([np.subtract(r["accel_bias"], r["accel_bias_true"])[:2] for r in table])
     lines += ["", f"Lateral velocity difference (state - poses): mean {dy.mean():+.3f}, "
