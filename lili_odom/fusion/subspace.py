@@ -270,7 +270,6 @@ def degenerate_anchor(
     T_target = remap_pose(np.asarray(T_meas, dtype=float) @ T_base_lidar,
                           np.asarray(T_ref, dtype=float) @ T_base_lidar, deg, length,
                           iterations) @ np.linalg.inv(T_base_lidar)
-    T_target = orthonormalize(T_target)
     cov_deg = np.eye(len(deg)) * sigma**2
     if reference_covariance is not None:
         cov_deg = cov_deg + covariance_along(reference_covariance, deg, length, T_base_lidar)

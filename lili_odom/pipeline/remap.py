@@ -82,12 +82,13 @@ def constrained_registration(
     B = orthonormal_rows(basis_scaled)
     if B.shape[0] == 0:
         return RemapResult(geometry.orthonormalize(registered), 0, True)
+    keep = remapping_matrix_from_basis(B, length)  # projects plain twists out of the subspace
     pose = remap_pose(registered, prediction, B, length)
     for n in range(1, max_iterations + 1):
         moved = step(pose)
         if moved is None:
             return RemapResult(pose, n, False, ok=False)
-        update = project_out(geometry.log(np.linalg.inv(pose) @ moved), B, length)
+        update = keep @ geometry.log(np.linalg.inv(pose) @ moved)
         pose = geometry.orthonormalize(pose @ geometry.exp(update))
         if np.linalg.norm(geometry.scale_twist(update, length)) < tolerance:
             return RemapResult(pose, n, True)
