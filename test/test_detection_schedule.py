@@ -124,3 +124,40 @@ def test_node_parameter_error_names_the_full_dotted_parameter():
     cfg.pipeline.detection_schedule.max_reuse = -1
     with pytest.raises(ValueError, match="pipeline.detection_schedule.max_reuse must be"):
         cfg.validate()
+
+
+def test_a_held_subspace_fills_in_missed_detections_until_the_hold_distance():
+    sched = DetectionSchedule(DetectionScheduleConfig(max_reuse=0, hold_distance_m=1.0))
+    axis = [[1.0, 0, 0, 0, 0, 0]]
+    sched.record(_result(_pose(0.0), axis))
+    # a miss 0.5 m on: the tunnel axis is still degenerate
+    miss = _result(_pose(0.5), np.zeros((0, 6)))
+    sched.record(miss)
+    held = sched.hold(miss, _pose(0.5))
+    assert held.dimension == 1 and held.details["held"] == 1
+    assert np.allclose(np.abs(held.basis_scaled), axis, atol=1e-9)
+    # a fresh result with its own rows keeps them; a held direction already inside is not added
+    own = _result(_pose(0.6), [[0.999, 0.0447, 0, 0, 0, 0]])
+    own.basis_scaled /= np.linalg.norm(own.basis_scaled)
+    assert sched.hold(own, _pose(0.6)) is own
+    # a held direction outside the result's subspace is added, orthonormal to its rows
+    yaw = _result(_pose(0.7), [[0, 0, 0, 0, 0, 1.0]])
+    merged = sched.hold(yaw, _pose(0.7))
+    assert merged.dimension == 2 and np.allclose(merged.basis_scaled[0], yaw.basis_scaled[0])
+    assert np.allclose(merged.basis_scaled @ merged.basis_scaled.T, np.eye(2), atol=1e-9)
+    # failures pass unchanged
+    failed = failed_result("lili", _pose(0.8), L, 0.0, "no points")
+    assert sched.hold(failed, _pose(0.8)) is failed
+    # 1.2 m from the degenerate detection the place is trusted again
+    late = _result(_pose(1.2), np.zeros((0, 6)))
+    assert sched.hold(late, _pose(1.2)).dimension == 0
+    assert sched.hold(miss, _pose(0.5)) is miss  # the hold is over, not resumed
+    # without a hold distance nothing is held
+    off = DetectionSchedule(DetectionScheduleConfig(hold_distance_m=0.0))
+    off.record(_result(_pose(0.0), axis))
+    assert off.hold(miss, _pose(0.5)) is miss
+
+
+def test_hold_distance_is_validated():
+    with pytest.raises(ValueError, match="hold_distance_m"):
+        DetectionScheduleConfig(hold_distance_m=-1.0).validate()

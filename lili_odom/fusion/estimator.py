@@ -352,6 +352,7 @@ class FusionEstimator:
         self._since_reset = 0
         self._history.clear()
         self._last_meas = None
+        self.wheel_scale.interrupt()
         self._body_rate = np.zeros(6)
         self._anchor_walk = 0.0
         # the LiDAR kernel trusts the IMU prediction only once the velocity is known
@@ -641,17 +642,15 @@ class FusionEstimator:
                                            self.T_base_lidar)
         else:
             self._anchor_walk = 0.0
-        lidar_delta = None
-        if cfg.lidar.factor == "between":
-            lidar_delta = np.linalg.inv(T_prev) @ T_meas if T_meas is not None else None
-        elif T_meas is not None and self._last_meas is not None and self._last_meas[0] == i - 1:
-            # consecutive registrations: the fused pose lags them by the fusion's compromise,
-            # which would bias the scale by several percent at 10 cm per scan
-            lidar_delta = np.linalg.inv(self._last_meas[1]) @ T_meas
-        self._last_meas = (i, T_meas) if T_meas is not None else None
-        if raw_wheel is not None and out.used_lidar and not len(basis) and lidar_delta is not None:
-            # a fully constrained registration measured this increment: calibrate the wheels
-            self.wheel_scale.observe(raw_wheel, lidar_delta)
+        # the wheel scale is calibrated on chains of consecutive, fully constrained
+        # registrations (not on the fused poses, which lag them by the fusion's compromise)
+        constrained = (T_meas is not None and not len(basis) and out.used_lidar
+                       and raw_wheel is not None)
+        if constrained and self._last_meas is not None and self._last_meas[0] == i - 1:
+            self.wheel_scale.observe(raw_wheel, np.linalg.inv(self._last_meas[1]) @ T_meas)
+        else:
+            self.wheel_scale.interrupt()
+        self._last_meas = (i, T_meas) if constrained else None
         if dt >= 0.01:  # shorter intervals turn registration noise into absurd rates
             rate = log(np.linalg.inv(T_prev) @ out.pose) / dt
             # the constant-velocity fallback never extrapolates faster than the plausibility gates

@@ -4,24 +4,40 @@ Inside a degenerate subspace the fused motion *is* the wheel motion, so a wheel 
 becomes drift at the same rate: 1 % over a 200 m featureless tunnel is 2 m along its axis. Tyre
 radius, load and surface change that scale by around a percent on a skid-steer robot, so it
 cannot be trusted from the robot's description. Where the registration is not degenerate, the
-LiDAR measures the same increments far better than the wheels; this module estimates
+LiDAR measures the same motion far better than the wheels; this module estimates
 
     s = (distance the wheels report) / (distance the LiDAR measured)
 
 over the recent non-degenerate travel and divides the translation of every wheel increment
 by it before the increment enters the graph.
 
-Only increments that moved, that the LiDAR constrained fully (no degenerate direction), and
-that agree with the LiDAR to within a slip gate are used; each counts with its distance and
-older travel fades with ``window_m`` so a changed surface is followed. Until ``min_distance_m``
-of such travel was seen, the scale is 1.
+The LiDAR side is not compared increment by increment: a registration is a few centimetres
+off along a weakly constrained axis, which at 10 cm per scan makes single-increment ratios
+swing between 0.6 and 3, and any gate on them biases the estimate by percents. Instead
+consecutive fully constrained increments are chained into *segments*; the LiDAR distance of a
+segment is the displacement between the registrations at its two ends (per-scan errors
+telescope away, leaving two endpoint errors over metres of travel), and the wheel distance is
+the wheels' translations over the same scans, rotated into the segment's start frame with the
+LiDAR's orientations (so a wheel *yaw* error does not shorten the chord). A segment ends and
+is used when ``segment_m`` of wheel travel is reached, or earlier when the chain is broken
+(degenerate scan, no registration, reset) if it covered ``min_segment_m``. Its ends are only
+placed at steady speed (the last ``steady_scans`` wheel increments within ``steady_ratio``), because a
+registration that loses ground while the robot accelerates from rest would otherwise put its
+shortfall into the first segment.
 
-Frames and units: increments are 4x4 motions of base_link from the previous stamp, expressed
-in base_link at the previous stamp [m]; the scale is dimensionless.
+Segments that disagree with the current estimate by more than the slip gate are not used
+(wheels spinning, bad registration); after ``max_rejections`` rejected segments in a row the
+estimate itself is taken to be wrong and restarted. Each segment counts with its distance;
+older travel fades with ``window_m`` so a changed surface is followed. Until
+``min_distance_m`` of accepted travel was seen, the scale is 1.
+
+Frames and units: increments are 4x4 motions of base_link from the previous scan, expressed
+in base_link at the previous scan [m]; the scale is dimensionless.
 """
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,12 +49,20 @@ __all__ = ["WheelScaleConfig", "WheelScaleEstimator"]
 class WheelScaleConfig:
     """Attributes:
         enabled: estimate and apply the wheel distance scale (False: scale 1).
-        min_distance_m: LiDAR-constrained travel needed before the estimate is applied [m].
-        window_m: travel over which old increments fade (exponential, per metre) [m].
-        min_scale / max_scale: the estimate is clamped to this range.
-        slip_gate_m / slip_gate_ratio: an increment whose wheel and LiDAR distances differ by
-            more than ``slip_gate_m + slip_gate_ratio * distance`` is not used (slip, bad
-            registration).
+        min_distance_m: accepted LiDAR-constrained travel needed before the estimate is
+            applied [m].
+        window_m: travel over which old segments fade (exponential, per metre) [m].
+        min_scale / max_scale: the estimate is clamped to this range; before any estimate,
+            segments outside it are rejected.
+        segment_m: wheel travel after which a segment is closed and used [m].
+        min_segment_m: a segment broken off earlier is used only if it covered this much [m].
+        steady_ratio / steady_scans: a segment end needs the last ``steady_scans`` wheel
+            increments to differ by less than this fraction of their mean (plus 2 mm) and to
+            move (>= 1 cm per scan).
+        slip_gate_m / slip_gate_ratio: a segment whose wheel distance differs from the current
+            scale times its LiDAR distance by more than ``slip_gate_m + slip_gate_ratio *
+            distance`` is not used.
+        max_rejections: that many rejected segments in a row restart the estimate.
     """
 
     enabled: bool = True
@@ -46,8 +70,13 @@ class WheelScaleConfig:
     window_m: float = 200.0
     min_scale: float = 0.8
     max_scale: float = 1.25
-    slip_gate_m: float = 0.02
-    slip_gate_ratio: float = 0.2
+    segment_m: float = 5.0
+    min_segment_m: float = 2.0
+    steady_ratio: float = 0.05
+    steady_scans: int = 10
+    slip_gate_m: float = 0.05
+    slip_gate_ratio: float = 0.03
+    max_rejections: int = 3
 
     def validate(self, prefix: str = "wheel_scale.") -> None:
         from lili_odom.errors import check_range
@@ -56,8 +85,24 @@ class WheelScaleConfig:
         check_range(prefix + "window_m", self.window_m, 0.0, 1e6, lo_open=True, unit="m")
         check_range(prefix + "min_scale", self.min_scale, 0.0, 1.0, lo_open=True)
         check_range(prefix + "max_scale", self.max_scale, 1.0, 100.0)
+        check_range(prefix + "segment_m", self.segment_m, 0.0, 1e4, lo_open=True, unit="m")
+        check_range(prefix + "min_segment_m", self.min_segment_m, 0.0, self.segment_m,
+                    lo_open=True, unit="m")
+        check_range(prefix + "steady_ratio", self.steady_ratio, 0.0, 10.0)
+        check_range(prefix + "steady_scans", self.steady_scans, 1, 1000)
         check_range(prefix + "slip_gate_m", self.slip_gate_m, 0.0, 10.0, unit="m")
         check_range(prefix + "slip_gate_ratio", self.slip_gate_ratio, 0.0, 10.0)
+        check_range(prefix + "max_rejections", self.max_rejections, 1, 1000)
+
+
+class _Segment:
+    """A chain of consecutive constrained increments since a steady start."""
+
+    def __init__(self) -> None:
+        self.lidar = np.eye(4)        # LiDAR motion since the start (start frame)
+        self.wheel = np.zeros(3)      # wheel translations, rotated into the start frame [m]
+        self.path = 0.0               # wheel path length [m]
+        self.end: tuple[np.ndarray, np.ndarray, float] | None = None  # last steady end
 
 
 class WheelScaleEstimator:
@@ -65,39 +110,108 @@ class WheelScaleEstimator:
 
     def __init__(self, config: WheelScaleConfig | None = None) -> None:
         self.config = config or WheelScaleConfig()
-        self.wheel_m = 0.0   # faded sum of wheel distances [m]
-        self.lidar_m = 0.0   # faded sum of the LiDAR distances along the wheel direction [m]
-        self.used = 0
-        self.rejected = 0
+        self.wheel_m = 0.0   # faded sum of segment wheel distances [m]
+        self.lidar_m = 0.0   # faded sum of segment LiDAR distances along the wheel chord [m]
+        self.used = 0        # segments used
+        self.rejected = 0    # segments rejected by the slip gate
+        self.restarts = 0    # estimates restarted after repeated rejections
+        self._segment: _Segment | None = None
+        self._steps: deque[float] = deque(maxlen=self.config.steady_scans)  # wheel steps [m]
+        self._rejections_in_row = 0
+
+    # -- feeding -------------------------------------------------------------------------
 
     def observe(self, wheel_delta: np.ndarray, lidar_delta: np.ndarray) -> bool:
-        """Add one increment pair; returns True when it was used.
+        """Add one increment pair over the same interval; returns True when it was chained.
 
         Args:
             wheel_delta: the *raw* wheel increment (4x4).
-            lidar_delta: the fully constrained LiDAR increment over the same interval (4x4).
+            lidar_delta: the LiDAR increment between two consecutive, fully constrained
+                registrations (4x4).
+        A non-finite pair breaks the chain (as :meth:`interrupt`).
         """
-        dw = np.asarray(wheel_delta, dtype=float)[:3, 3]
-        dl = np.asarray(lidar_delta, dtype=float)[:3, 3]
-        n = float(np.linalg.norm(dw))
-        if not (np.all(np.isfinite(dw)) and np.all(np.isfinite(dl))) or n < 1e-3:
+        W = np.asarray(wheel_delta, dtype=float)
+        L = np.asarray(lidar_delta, dtype=float)
+        if W.shape != (4, 4) or L.shape != (4, 4) or not (np.all(np.isfinite(W))
+                                                         and np.all(np.isfinite(L))):
+            self.interrupt()
             return False
-        along = float(dl @ (dw / n))  # LiDAR distance along the wheels' direction of travel
+        step = float(np.linalg.norm(W[:3, 3]))
+        self._steps.append(step)
+        steady = self._steady()
+        seg = self._segment
+        if seg is None:
+            # the increment only tells the speed; a segment starts at a steady scan
+            if steady:
+                self._segment = _Segment()
+            return False
+        seg.wheel = seg.wheel + seg.lidar[:3, :3] @ W[:3, 3]
+        seg.lidar = seg.lidar @ L
+        seg.path += step
+        if steady:
+            seg.end = (seg.lidar.copy(), seg.wheel.copy(), seg.path)
+            if seg.path >= self.config.segment_m:
+                self._close(seg)
+                self._segment = _Segment()  # contiguous: the next segment starts here
+        return True
+
+    def interrupt(self) -> None:
+        """The chain is broken (degenerate or missing registration, reset): the segment so
+        far is used up to its last steady end if it is long enough, and a new one starts at
+        the next steady scan."""
+        if self._segment is not None:
+            self._close(self._segment)
+        self._segment = None
+        self._steps.clear()
+
+    def _steady(self) -> bool:
+        steps = self._steps
+        if len(steps) < (steps.maxlen or 1):
+            return False
+        mean = sum(steps) / len(steps)
+        return mean >= 0.01 and max(steps) - min(steps) <= self.config.steady_ratio * mean + 0.002
+
+    def _close(self, seg: _Segment) -> None:
         cfg = self.config
-        if abs(along - n) > cfg.slip_gate_m + cfg.slip_gate_ratio * n:
+        if seg.end is None:
+            return
+        lidar, wheel, path = seg.end
+        w = float(np.linalg.norm(wheel))
+        if path < cfg.min_segment_m or w < 0.5 * path:  # too short, or turned back on itself
+            return
+        along = float(lidar[:3, 3] @ (wheel / w))  # LiDAR distance along the wheels' chord
+        ref = self.scale if self.established else None
+        if ref is None:
+            ok = cfg.min_scale * along <= w <= cfg.max_scale * along
+        else:
+            ok = abs(w - ref * along) <= cfg.slip_gate_m + cfg.slip_gate_ratio * w
+        if not ok:
             self.rejected += 1
-            return False
-        fade = math.exp(-n / cfg.window_m)
-        self.wheel_m = self.wheel_m * fade + n
+            self._rejections_in_row += 1
+            if self._rejections_in_row >= cfg.max_rejections:
+                # the segments keep disagreeing with the estimate: the estimate is wrong
+                self.wheel_m = self.lidar_m = 0.0
+                self.restarts += 1
+                self._rejections_in_row = 0
+            return
+        self._rejections_in_row = 0
+        fade = math.exp(-w / cfg.window_m)
+        self.wheel_m = self.wheel_m * fade + w
         self.lidar_m = self.lidar_m * fade + along
         self.used += 1
-        return True
+
+    # -- result --------------------------------------------------------------------------
+
+    @property
+    def established(self) -> bool:
+        """True once enough constrained travel was accepted for the estimate to apply."""
+        return self.lidar_m >= self.config.min_distance_m and self.lidar_m > 0
 
     @property
     def scale(self) -> float:
         """Wheel distance per LiDAR distance (1 until enough travel was observed)."""
         cfg = self.config
-        if not cfg.enabled or self.lidar_m < cfg.min_distance_m or self.lidar_m <= 0:
+        if not cfg.enabled or not self.established:
             return 1.0
         return float(np.clip(self.wheel_m / self.lidar_m, cfg.min_scale, cfg.max_scale))
 

@@ -9,7 +9,15 @@ current registered pose. A reused result is *carried over* rigidly: its degenera
 fixed in the odometry frame, so its basis is moved from the old sensor body frame to the new
 one with the adjoint of the relative pose and re-orthonormalised in the scaled space.
 
-``max_reuse = 0`` runs the detector on every scan (the paper's setting). The defaults and their
+``max_reuse = 0`` runs the detector on every scan (the paper's setting).
+
+A degenerate subspace can also be *held* (``hold_distance_m`` > 0): after a detection found
+one, the next results, fresh or reused, are merged with it (carried over the same way) until
+the sensor has moved ``hold_distance_m`` from it. A place does not stop being a tunnel from
+one scan to the next, while a detector misses single scans now and then (a sparse scan, a
+bump); with an absolute LiDAR factor one missed scan measures the registration's slide along
+the axis and pins the position to it. Holding costs, at a real exit from the degenerate
+place, the wheels' error over that distance. The defaults and their
 effect on the detected subspace and the odometry are measured by
 ``benchmarks/detection_cost.py`` (results in ``benchmarks/results/detection_cost.md``).
 
@@ -32,11 +40,14 @@ class DetectionScheduleConfig:
         max_reuse: consecutive scans that may reuse one detection (0: detect every scan).
         reuse_distance_m: re-detect once the sensor moved this far from the detection [m].
         reuse_angle_deg: re-detect once the sensor turned this much from the detection [deg].
+        hold_distance_m: a degenerate subspace is merged into the following results until
+            the sensor moved this far from its detection [m]; 0 (default) = no hold.
     """
 
     max_reuse: int = 2
     reuse_distance_m: float = 0.3
     reuse_angle_deg: float = 5.0
+    hold_distance_m: float = 0.0
 
     def validate(self, prefix: str = "detection_schedule.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -45,6 +56,7 @@ class DetectionScheduleConfig:
         check_range(prefix + "max_reuse", self.max_reuse, 0, 1000)
         check_range(prefix + "reuse_distance_m", self.reuse_distance_m, 0.0, 100.0, unit="m")
         check_range(prefix + "reuse_angle_deg", self.reuse_angle_deg, 0.0, 180.0, unit="deg")
+        check_range(prefix + "hold_distance_m", self.hold_distance_m, 0.0, 1000.0, unit="m")
 
 
 def carry_over(result: DegeneracyResult, pose: np.ndarray, age: int) -> DegeneracyResult:
@@ -75,11 +87,15 @@ class DetectionSchedule:
         self.config = config or DetectionScheduleConfig()
         self._last: DegeneracyResult | None = None
         self._age = 0
+        self._held: DegeneracyResult | None = None  # last fresh degenerate detection
+        self._held_age = 0
 
     def reset(self) -> None:
         """Forget the last detection (pipeline reset, re-initialisation, failed registration)."""
         self._last = None
         self._age = 0
+        self._held = None
+        self._held_age = 0
 
     def reusable(self, pose: np.ndarray) -> DegeneracyResult | None:
         """The last detection carried over to ``pose``, or None when the detector must run."""
@@ -99,3 +115,36 @@ class DetectionSchedule:
         """A fresh detection: reusable from the next scan on when it succeeded."""
         self._last = result if result.ok else None
         self._age = 0
+        if result.ok and result.degenerate:
+            self._held, self._held_age = result, 0
+
+    def hold(self, result: DegeneracyResult, pose: np.ndarray) -> DegeneracyResult:
+        """``result`` with the held degenerate subspace merged in (see module docstring).
+
+        The result's own rows are kept as they are; a held direction is added where it is
+        not already (nearly) inside them. Failed results are returned unchanged.
+        """
+        held = self._held
+        if held is None or not result.ok or self.config.hold_distance_m <= 0:
+            return result
+        if np.linalg.norm((np.linalg.inv(held.pose) @ pose)[:3, 3]) > self.config.hold_distance_m:
+            self._held = None
+            return result
+        self._held_age += 1
+        carried = carry_over(held, pose, self._held_age)
+        L = result.characteristic_length
+        rows = list(result.basis_scaled)
+        added = 0
+        for b in geometry.scale_twist(geometry.unscale_twist(carried.basis_scaled,
+                                                             carried.characteristic_length), L):
+            b = b / np.linalg.norm(b)
+            for r in rows:
+                b = b - (b @ r) * r
+            n = float(np.linalg.norm(b))
+            if n > 0.5:  # more than 30 deg away from the result's own subspace
+                rows.append(b / n)
+                added += 1
+        if not added:
+            return result
+        details = {**result.details, "held": added, "held_age": self._held_age}
+        return replace(result, basis_scaled=np.array(rows), details=details)

@@ -322,6 +322,9 @@ class OdometryPipeline:
                                                    optimized_pose=reg.pose)
                 self._schedule.record(degeneracy)
                 self.counters["detections"] += 1
+            degeneracy = self._schedule.hold(degeneracy, reg.pose)
+            if degeneracy.details.get("held"):
+                self.counters["detections_held"] += 1
             if not degeneracy.ok:
                 self.counters["detector_failures"] += 1
                 warnings.append(f"detector: {degeneracy.reason}")
