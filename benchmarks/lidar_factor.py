@@ -32,21 +32,31 @@ from arc_diagnostics import _errors_in_true_body_frame  # noqa: E402
 from lili_odom import geometry  # noqa: E402
 from lili_odom.sim.generator import ensure_trial_bag  # noqa: E402
 
+#: the parameters every variant sets (so that a variant does not depend on the defaults)
+_NEUTRAL: dict[str, object] = {"fusion.lidar.factor": "between", "fusion.lidar.anchor_sigma": 0.0,
+                               "fusion.lidar.basis_snap": 0.0, "remap_iterations": 0}
+
+
+def _variant(what: str, **overrides: object) -> tuple[dict[str, object], str]:
+    return {**_NEUTRAL, **{k.replace("__", "."): v for k, v in overrides.items()}}, what
+
+
 #: variant -> (pipeline parameter overrides, what it is)
 VARIANTS: dict[str, tuple[dict[str, object], str]] = {
-    "between": ({}, "default: between factor from the previous fused pose"),
-    "between_remap": ({"remap_iterations": 10}, "between, registration remapped to the wheels"),
-    "prior": ({"fusion.lidar.factor": "prior", "fusion.lidar.anchor_sigma": 0.0,
-               "fusion.lidar.degenerate_epsilon": 1e-9}, "absolute prior factor"),
-    "prior_remap": ({"fusion.lidar.factor": "prior", "fusion.lidar.anchor_sigma": 0.0,
-                     "remap_iterations": 10}, "prior, registration remapped to the wheels"),
-    "prior_anchor": ({"fusion.lidar.factor": "prior", "fusion.lidar.anchor_sigma": 0.02,
-                      "fusion.lidar.basis_snap": 0.1},
-                     "prior, degenerate components anchored to the wheels (experimental yaml)"),
-    "hybrid": ({"fusion.lidar.factor": "hybrid", "fusion.lidar.anchor_sigma": 0.0},
-               "prior in translation and yaw, between in roll and pitch"),
-    "hybrid_remap": ({"fusion.lidar.factor": "hybrid", "fusion.lidar.anchor_sigma": 0.0,
-                      "remap_iterations": 10}, "hybrid, registration remapped to the wheels"),
+    "between": _variant("default: between factor from the previous fused pose"),
+    "between_remap": _variant("between, registration remapped to the wheels",
+                              remap_iterations=10),
+    "prior": _variant("absolute prior factor", fusion__lidar__factor="prior",
+                      fusion__lidar__degenerate_epsilon=1e-9),
+    "prior_remap": _variant("prior, registration remapped to the wheels",
+                            fusion__lidar__factor="prior", remap_iterations=10),
+    "prior_anchor": _variant("prior, degenerate components anchored to the wheels "
+                             "(config/prior_factor.yaml)", fusion__lidar__factor="prior",
+                             fusion__lidar__anchor_sigma=0.02, fusion__lidar__basis_snap=0.1),
+    "hybrid": _variant("prior in translation and yaw, between in roll and pitch",
+                       fusion__lidar__factor="hybrid"),
+    "hybrid_remap": _variant("hybrid, registration remapped to the wheels (config/hybrid_factor.yaml)",
+                             fusion__lidar__factor="hybrid", remap_iterations=10),
 }
 SAMPLE_TIMES = (60.0, 120.0, 180.0, 220.0, 240.0, 300.0)
 

@@ -24,6 +24,11 @@ def test_run_none_tracks_the_truth_and_writes_every_output(tmp_path, capsys):
     estimate_lines = (out / "estimate.tum").read_text().splitlines()
     assert len(estimate_lines) == result["scans_processed"]
     assert len(estimate_lines[0].split()) == 8
+    import numpy as np
+    scans = np.genfromtxt(out / "scans.csv", delimiter=",", names=True)
+    assert len(scans) == result["scans_processed"]
+    # the online wheel distance scale per scan: 1 until calibrated, always within its range
+    assert np.all((scans["wheel_scale"] >= 0.8) & (scans["wheel_scale"] <= 1.25))
 
 
 def test_run_missing_bag_is_a_one_line_error(tmp_path, capsys):

@@ -112,7 +112,8 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
             for k, v in out.timings.items():
                 run.timings.setdefault(k, []).append(v)
             rows.append([out.stamp, dim, *out.pose[:3, 3],
-                         *(out.timings.get(k, float("nan")) for k in STAGES)])
+                         *(out.timings.get(k, float("nan")) for k in STAGES),
+                         out.details.get("wheel_scale", float("nan"))])
             writer.write_output(out)
 
         for item in reader:
@@ -146,7 +147,8 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
     write_tum(out_dir / "estimate.tum", run.estimates)
     with open(out_dir / "scans.csv", "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["stamp", "dimension", "x", "y", "z", *(f"{k}_s" for k in STAGES)])
+        w.writerow(["stamp", "dimension", "x", "y", "z", *(f"{k}_s" for k in STAGES),
+                    "wheel_scale"])
         w.writerows(rows)
     dims = np.asarray(run.dimensions)
     summary: dict = {

@@ -48,12 +48,12 @@ class LidarNoiseConfig:
             ``PriorFactorPose3`` on the new pose (the registration measures the pose against
             the map, which lives in the odometry frame); no oscillation, but see
             ``anchor_sigma`` and ``benchmarks/results/prior_factor/tunnel.md``. ``"hybrid"``
-            (experimental, ``config/experimental_hybrid_factor.yaml``): the prior for
+            (experimental, ``config/hybrid_factor.yaml``): the prior for
             translation and yaw, the between factor for roll and pitch (each with the
             information restricted to those directions). With solution remapping
-            (``pipeline.remap_iterations``) it gave the best Trial 1 figures
-            (``benchmarks/results/lidar_factor.md``) but drifted along the axis on Trial 2
-            (``benchmarks/results/hybrid_factor/tunnel.md``); why the relative tilt matters
+            (``pipeline.remap_iterations``) and the segment wheel scale it gives the best
+            Trial 1 and 2 figures (``benchmarks/results/hybrid_factor/tunnel.md``) but fails
+            the short start-while-moving test, so it is not the default; why the relative tilt matters
             on Trial 1 is not established (suspected: the prior pins the tilt to the local
             map's, and the IMU's gravity projection turns a tilt error into velocity along
             the axis).
