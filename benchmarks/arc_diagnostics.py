@@ -88,7 +88,7 @@ def probe(times: list[float], resolution: tuple[int, int], history: float) -> li
     return lines + [""]
 
 
-def _errors_in_true_body_frame(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
+def errors_in_true_body_frame(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
     """(stamps from the first estimate [s], (n, 4, 4) errors ``T_true^-1 T_est``), both
     trajectories started at the same pose (no alignment), associated as the metrics do."""
     from evo.core import sync
@@ -112,7 +112,7 @@ def _run_name(run_dir: Path) -> str:
 
 def errors(run_dir: Path, period: float) -> list[str]:
     """Error of the estimate by component, in the true body frame, every ``period`` s."""
-    t, err = _errors_in_true_body_frame(run_dir)
+    t, err = errors_in_true_body_frame(run_dir)
     rot = np.degrees([geometry.log(E)[3:] for E in err])
     lines = [f"## Error by component: {_run_name(run_dir)}", "",
              "Estimate against truth, both started at the same pose (no alignment); position "
@@ -129,7 +129,7 @@ def errors(run_dir: Path, period: float) -> list[str]:
 
 
 def jumps(run_dir: Path, threshold: float) -> list[str]:
-    t_all, err = _errors_in_true_body_frame(run_dir)
+    t_all, err = errors_in_true_body_frame(run_dir)
     lateral = err[:, 1, 3]
     step = np.abs(np.diff(lateral))
     t = t_all[1:]

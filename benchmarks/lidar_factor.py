@@ -28,7 +28,7 @@ for p in (ROOT, ROOT / "benchmarks"):
     if str(p) not in sys.path:
         sys.path.insert(0, str(p))
 
-from arc_diagnostics import _errors_in_true_body_frame  # noqa: E402
+from arc_diagnostics import errors_in_true_body_frame  # noqa: E402
 from lili_odom import geometry  # noqa: E402
 from lili_odom.sim.generator import ensure_trial_bag  # noqa: E402
 
@@ -55,7 +55,8 @@ VARIANTS: dict[str, tuple[dict[str, object], str]] = {
                              fusion__lidar__anchor_sigma=0.02, fusion__lidar__basis_snap=0.1),
     "hybrid": _variant("prior in translation and yaw, between in roll and pitch",
                        fusion__lidar__factor="hybrid"),
-    "hybrid_remap": _variant("hybrid, registration remapped to the wheels (config/hybrid_factor.yaml)",
+    "hybrid_remap": _variant("hybrid, registration remapped to the wheels "
+                             "(config/hybrid_factor.yaml)",
                              fusion__lidar__factor="hybrid", remap_iterations=10),
 }
 SAMPLE_TIMES = (60.0, 120.0, 180.0, 220.0, 240.0, 300.0)
@@ -93,7 +94,7 @@ def run_variant(bag: Path, name: str, run_dir: Path, reuse: bool) -> Path:
 
 def summarise(name: str, run_dir: Path) -> dict:
     metrics = json.loads((run_dir / "metrics.json").read_text())["metrics"]
-    t, err = _errors_in_true_body_frame(run_dir)
+    t, err = errors_in_true_body_frame(run_dir)
     samples = {}
     for tq in SAMPLE_TIMES:
         if tq > t[-1]:

@@ -13,7 +13,7 @@ and, for a ``lili-odom run`` / ``evaluate`` run directory (``estimate.tum``, ``t
 ``scans.csv``), tabulates per event: the over-read distance, the share of the run's scans in
 the event that were flagged degenerate, and the change of the along-axis error across the
 event (error in the true base_link frame, both trajectories started at the same pose, no
-alignment; as ``arc_diagnostics.py errors``). The change over an event divided by its
+alignment; ``arc_diagnostics.errors_in_true_body_frame``). The change over an event divided by its
 over-read is the share of the slip that reached the estimate ("leak").
 
 It also splits the along-axis error's variation between the slip events and the rest of the
@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from benchmarks.arc_diagnostics import _errors_in_true_body_frame  # noqa: E402
+from benchmarks.arc_diagnostics import errors_in_true_body_frame  # noqa: E402
 
 SETTLE_S = 0.5  # the error is read this long after an event ends (the fusion lags the wheels)
 
@@ -62,7 +62,7 @@ def slip_events(trial: int, seed: int) -> tuple[list[tuple[float, float, float]]
 def budget(run_dir: Path, trial: int, seed: int) -> dict:
     from lili_odom.sim.generator import EPOCH_NS
 
-    t_rel, err = _errors_in_true_body_frame(run_dir)
+    t_rel, err = errors_in_true_body_frame(run_dir)
     with open(run_dir / "scans.csv", newline="") as f:
         scans = list(csv.DictReader(f))
     stamps = np.array([float(r["stamp"]) for r in scans])

@@ -1,6 +1,6 @@
 """Odometry started while the robot drives through the featureless tunnel, per LiDAR factor.
 
-    python benchmarks/start_while_moving.py                 # 3 windows x 3 settings, ~2 min on 2 cores
+    python benchmarks/start_while_moving.py     # 3 windows x 3 settings, ~2 min on 2 cores
 
 ``test/test_degenerate_odometry.py`` checks one such start (Trial 1 at 100 s, 8 s, 32 x 256).
 Its scenario is sensitive to detector misses in the first scans after a start while moving.

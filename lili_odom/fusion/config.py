@@ -53,8 +53,8 @@ class LidarNoiseConfig:
             information restricted to those directions). With solution remapping
             (``pipeline.remap_iterations``) and the segment wheel scale it gives the best
             Trial 1 and 2 figures (``benchmarks/results/hybrid_factor/tunnel.md``) but fails
-            the short start-while-moving test, so it is not the default; why the relative tilt matters
-            on Trial 1 is not established (suspected: the prior pins the tilt to the local
+            the short start-while-moving test, so it is not the default; why the relative
+            tilt matters on Trial 1 is not established (suspected: the prior pins the tilt to the local
             map's, and the IMU's gravity projection turns a tilt error into velocity along
             the axis).
         basis_snap: components of a degenerate basis row below this fraction of its largest

@@ -21,9 +21,9 @@ the wheels' translations over the same scans, rotated into the segment's start f
 LiDAR's orientations (so a wheel *yaw* error does not shorten the chord). A segment ends and
 is used when ``segment_m`` of wheel travel is reached, or earlier when the chain is broken
 (degenerate scan, no registration, reset) if it covered ``min_segment_m``. Its ends are only
-placed at steady speed (the last ``steady_scans`` wheel increments within ``steady_ratio``), because a
-registration that loses ground while the robot accelerates from rest would otherwise put its
-shortfall into the first segment.
+placed at steady speed (the last ``steady_scans`` wheel increments within
+``steady_ratio``), because a registration that loses ground while the robot accelerates from
+rest would otherwise put its shortfall into the first segment.
 
 Segments that disagree with the current estimate by more than the slip gate are not used
 (wheels spinning, bad registration); after ``max_rejections`` rejected segments in a row the
