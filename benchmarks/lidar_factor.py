@@ -34,7 +34,8 @@ from lili_odom.sim.generator import ensure_trial_bag  # noqa: E402
 
 #: the parameters every variant sets (so that a variant does not depend on the defaults)
 _NEUTRAL: dict[str, object] = {"fusion.lidar.factor": "between", "fusion.lidar.anchor_sigma": 0.0,
-                               "fusion.lidar.basis_snap": 0.0, "remap_iterations": 0}
+                               "fusion.lidar.basis_snap": 0.0, "remap_iterations": 0,
+                               "detection_schedule.hold_distance_m": 0.0}
 
 
 def _variant(what: str, **overrides: object) -> tuple[dict[str, object], str]:
@@ -43,7 +44,8 @@ def _variant(what: str, **overrides: object) -> tuple[dict[str, object], str]:
 
 #: variant -> (pipeline parameter overrides, what it is)
 VARIANTS: dict[str, tuple[dict[str, object], str]] = {
-    "between": _variant("default: between factor from the previous fused pose"),
+    "between": _variant("between factor from the previous fused pose "
+                        "(config/between_factor.yaml)"),
     "between_remap": _variant("between, registration remapped to the wheels",
                               remap_iterations=10),
     "prior": _variant("absolute prior factor", fusion__lidar__factor="prior",
@@ -56,7 +58,7 @@ VARIANTS: dict[str, tuple[dict[str, object], str]] = {
     "hybrid": _variant("prior in translation and yaw, between in roll and pitch",
                        fusion__lidar__factor="hybrid"),
     "hybrid_remap": _variant("hybrid, registration remapped to the wheels "
-                             "(config/hybrid_factor.yaml)",
+                             "(config/hybrid_factor.yaml; the defaults add the hold)",
                              fusion__lidar__factor="hybrid", remap_iterations=10),
 }
 SAMPLE_TIMES = (60.0, 120.0, 180.0, 220.0, 240.0, 300.0)

@@ -161,3 +161,37 @@ def test_a_held_subspace_fills_in_missed_detections_until_the_hold_distance():
 def test_hold_distance_is_validated():
     with pytest.raises(ValueError, match="hold_distance_m"):
         DetectionScheduleConfig(hold_distance_m=-1.0).validate()
+
+
+def test_the_hold_ends_after_the_warm_up_travel_and_restarts_with_a_new_map():
+    cfg = DetectionScheduleConfig(max_reuse=0, hold_distance_m=1.0, hold_warmup_m=2.0)
+    sched = DetectionSchedule(cfg)
+    axis = [[1.0, 0, 0, 0, 0, 0]]
+    x = 0.0
+    for _ in range(4):  # 1.5 m of travel: detections at 0, 0.5, 1.0 and 1.5 m, misses held
+        sched.record(_result(_pose(x), axis))
+        assert sched.hold(_result(_pose(x), axis), _pose(x)).dimension == 1
+        miss = _result(_pose(x + 0.25), np.zeros((0, 6)))
+        assert sched.hold(miss, _pose(x + 0.25)).dimension == 1
+        x += 0.5
+    # past 2 m of path the held subspace is no longer merged, although the last degenerate
+    # detection is only 0.75 m behind
+    sched.record(_result(_pose(x), axis))
+    sched.hold(_result(_pose(x), axis), _pose(x))
+    late = _result(_pose(x + 0.25), np.zeros((0, 6)))
+    assert sched.hold(late, _pose(x + 0.25)) is late
+    # a failed registration (reset without a new map) does not restart the warm-up ...
+    sched.reset()
+    sched.record(_result(_pose(x + 0.5), axis))
+    late = _result(_pose(x + 0.75), np.zeros((0, 6)))
+    assert sched.hold(late, _pose(x + 0.75)) is late
+    # ... a new map does
+    sched.reset(new_map=True)
+    sched.record(_result(_pose(10.0), axis))
+    miss = _result(_pose(10.25), np.zeros((0, 6)))
+    assert sched.hold(miss, _pose(10.25)).dimension == 1
+
+
+def test_hold_warmup_is_validated():
+    with pytest.raises(ValueError, match="hold_warmup_m"):
+        DetectionScheduleConfig(hold_warmup_m=-1.0).validate()

@@ -40,7 +40,7 @@ class LidarNoiseConfig:
             noisy axis (e.g. roll about a horseshoe tunnel's arch) silence the axes that are
             well measured; 3 keeps ~60 % weight at nominal noise and still cuts a slid
             registration (10 sigma) to ~8 %.
-        factor: how the scan-to-map registration enters the graph. ``"between"`` (default):
+        factor: how the scan-to-map registration enters the graph. ``"between"``:
             a ``BetweenFactorPose3`` from the previous fused pose with
             ``Z = T_fused(i-1)^-1 T_icp``. When iSAM2 later moves ``X(i-1)`` the correction
             is counted twice, and the estimate oscillates scan to scan across the tunnel
@@ -48,26 +48,26 @@ class LidarNoiseConfig:
             ``PriorFactorPose3`` on the new pose (the registration measures the pose against
             the map, which lives in the odometry frame); no oscillation, but see
             ``anchor_sigma`` and ``benchmarks/results/prior_factor/tunnel.md``. ``"hybrid"``
-            (experimental, ``config/hybrid_factor.yaml``): the prior for
-            translation and yaw, the between factor for roll and pitch (each with the
-            information restricted to those directions). With solution remapping
-            (``pipeline.remap_iterations``) and the segment wheel scale it gives the best
-            Trial 1 and 2 figures (``benchmarks/results/hybrid_factor/tunnel.md``) but fails
-            the short start-while-moving test, so it is not the default; why the relative
-            tilt matters on Trial 1 is not established (suspected: the prior pins the tilt to the local
-            map's, and the IMU's gravity projection turns a tilt error into velocity along
-            the axis).
+            (default): the prior for translation and yaw, the between factor for roll and
+            pitch (each with the information restricted to those directions). It needs
+            solution remapping (``pipeline.remap_iterations``) and, when the odometry starts
+            while moving, the detection hold of the map's first metres
+            (``pipeline.detection_schedule``); with both it gives the best Trial 1 and 2
+            figures (README, Table II). Why the relative tilt matters on Trial 1 is not
+            established (suspected: the prior pins the tilt to the local map's, and the IMU's
+            gravity projection turns a tilt error into velocity along the axis).
+            ``config/between_factor.yaml`` restores the earlier between-factor setup.
         basis_snap: components of a degenerate basis row below this fraction of its largest
             one are zeroed before the LiDAR information is restricted
             (:func:`lili_odom.fusion.subspace.snap_basis`); 0 = use the basis as detected.
-        anchor_sigma: with ``factor="prior"`` and wheel odometry, the prior's degenerate
+        anchor_sigma: with ``factor="prior"`` or ``"hybrid"`` and wheel odometry, the prior's degenerate
             components are taken from the wheel-predicted pose and held with this sigma
             (scaled twist units, m; :func:`lili_odom.fusion.subspace.degenerate_anchor`).
             Without it the position along the axis drifted against the wheels in the
             simulated tunnel (suspected cause: small spurious components of the detected
             basis, not confirmed in a synthetic test). The
             reported covariance adds the wheel random walk along the subspace, which the
-            anchor would otherwise hide. 0 = no anchor.
+            anchor would otherwise hide. 0 (default) = no anchor.
         robust_after_updates: the kernel is off for this many updates after (re)initialisation
             or after an interval whose IMU samples reach 95 % of the sensor range (then the
             velocity is not observed or corrupt, so the IMU prediction cannot be trusted; such
@@ -82,8 +82,8 @@ class LidarNoiseConfig:
     robust_kernel: str = "cauchy"
     robust_threshold: float = 3.0
     robust_after_updates: int = 20
-    factor: str = "between"
-    anchor_sigma: float = 0.02
+    factor: str = "hybrid"
+    anchor_sigma: float = 0.0
     basis_snap: float = 0.0
 
     def validate(self, prefix: str = "lidar.") -> None:

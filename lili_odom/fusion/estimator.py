@@ -14,7 +14,7 @@ Factors between consecutive states ``i-1 -> i``:
   the odometry frame; the map is built from fused poses). Its information is the LiDAR
   information with the detected degenerate directions removed
   (:mod:`lili_odom.fusion.subspace`), plus a tiny epsilon there. ``lidar.factor`` chooses
-  the form: ``"between"`` (default), a ``BetweenFactorPose3`` with the relative measurement
+  the form: ``"between"``, a ``BetweenFactorPose3`` with the relative measurement
   ``Z = T_fused(i-1)^-1 T_icp`` against the previous **fused** pose; or ``"prior"``
   (experimental), a ``PriorFactorPose3`` at ``T_icp`` whose degenerate components are taken
   from the wheel prediction (solution remapping) and held with ``lidar.anchor_sigma``. The
@@ -22,7 +22,7 @@ Factors between consecutive states ``i-1 -> i``:
   is dragged along and the next registration corrects it back), so the estimate oscillates
   across the tunnel scan to scan; the absolute form does not, but is sensitive to spurious
   components of the detected basis (see :func:`lili_odom.fusion.subspace.degenerate_anchor`
-  and solution remapping, :mod:`lili_odom.pipeline.remap`). ``"hybrid"`` (experimental)
+  and solution remapping, :mod:`lili_odom.pipeline.remap`). ``"hybrid"`` (default)
   adds the prior restricted to translation and yaw and the between factor restricted to roll
   and pitch.
 * Wheel ``BetweenFactorPose3`` whose information lives only inside the degenerate subspace

@@ -17,7 +17,11 @@ the sensor has moved ``hold_distance_m`` from it. A place does not stop being a 
 one scan to the next, while a detector misses single scans now and then (a sparse scan, a
 bump); with an absolute LiDAR factor one missed scan measures the registration's slide along
 the axis and pins the position to it. Holding costs, at a real exit from the degenerate
-place, the wheels' error over that distance. The defaults and their
+place, the wheels' error over that distance. ``hold_warmup_m`` > 0 limits the hold to the
+first metres of travel after the local map was (re)started: a map built from a few scans of a
+moving sensor is mostly the ground rings of those scans, which can hold the registration (and
+the detector's verdict) along a featureless axis until the map spans several scan positions
+(``benchmarks/start_while_moving.py``). The defaults and their
 effect on the detected subspace and the odometry are measured by
 ``benchmarks/detection_cost.py`` (results in ``benchmarks/results/detection_cost.md``).
 
@@ -41,13 +45,17 @@ class DetectionScheduleConfig:
         reuse_distance_m: re-detect once the sensor moved this far from the detection [m].
         reuse_angle_deg: re-detect once the sensor turned this much from the detection [deg].
         hold_distance_m: a degenerate subspace is merged into the following results until
-            the sensor moved this far from its detection [m]; 0 (default) = no hold.
+            the sensor moved this far from its detection [m]; 0 = no hold.
+            Default: 1 m, during the first 10 m after a (re)start (``hold_warmup_m``).
+        hold_warmup_m: the hold applies only until the sensor has travelled this far (path
+            length) since the local map was (re)started [m]; 0 = for the whole run.
     """
 
     max_reuse: int = 2
     reuse_distance_m: float = 0.3
     reuse_angle_deg: float = 5.0
-    hold_distance_m: float = 0.0
+    hold_distance_m: float = 1.0
+    hold_warmup_m: float = 10.0
 
     def validate(self, prefix: str = "detection_schedule.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -57,6 +65,7 @@ class DetectionScheduleConfig:
         check_range(prefix + "reuse_distance_m", self.reuse_distance_m, 0.0, 100.0, unit="m")
         check_range(prefix + "reuse_angle_deg", self.reuse_angle_deg, 0.0, 180.0, unit="deg")
         check_range(prefix + "hold_distance_m", self.hold_distance_m, 0.0, 1000.0, unit="m")
+        check_range(prefix + "hold_warmup_m", self.hold_warmup_m, 0.0, 1e6, unit="m")
 
 
 def carry_over(result: DegeneracyResult, pose: np.ndarray, age: int) -> DegeneracyResult:
@@ -89,13 +98,22 @@ class DetectionSchedule:
         self._age = 0
         self._held: DegeneracyResult | None = None  # last fresh degenerate detection
         self._held_age = 0
+        self._travelled = 0.0  # path length since the local map was (re)started [m]
+        self._last_pose: np.ndarray | None = None
 
-    def reset(self) -> None:
-        """Forget the last detection (pipeline reset, re-initialisation, failed registration)."""
+    def reset(self, new_map: bool = False) -> None:
+        """Forget the last detection (pipeline reset, re-initialisation, failed registration).
+
+        Args:
+            new_map: the local map was cleared too: the hold's warm-up starts again.
+        """
         self._last = None
         self._age = 0
         self._held = None
         self._held_age = 0
+        if new_map:
+            self._travelled = 0.0
+            self._last_pose = None
 
     def reusable(self, pose: np.ndarray) -> DegeneracyResult | None:
         """The last detection carried over to ``pose``, or None when the detector must run."""
@@ -124,8 +142,14 @@ class DetectionSchedule:
         The result's own rows are kept as they are; a held direction is added where it is
         not already (nearly) inside them. Failed results are returned unchanged.
         """
-        held = self._held
-        if held is None or not result.ok or self.config.hold_distance_m <= 0:
+        if self._last_pose is not None:
+            self._travelled += float(np.linalg.norm(pose[:3, 3] - self._last_pose[:3, 3]))
+        self._last_pose = np.asarray(pose, dtype=float)
+        held, cfg = self._held, self.config
+        if held is None or not result.ok or cfg.hold_distance_m <= 0:
+            return result
+        if 0 < cfg.hold_warmup_m < self._travelled:
+            self._held = None
             return result
         if np.linalg.norm((np.linalg.inv(held.pose) @ pose)[:3, 3]) > self.config.hold_distance_m:
             self._held = None

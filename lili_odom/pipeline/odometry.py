@@ -67,7 +67,7 @@ class PipelineConfig:
         remap_iterations: on a degenerate scan, the registration is re-run held at the wheel
             prediction along the degenerate subspace (solution remapping,
             :mod:`lili_odom.pipeline.remap`) for at most this many single ICP iterations, and
-            that pose is what the LiDAR factor measures; 0 (default) = the unconstrained
+            that pose is what the LiDAR factor measures; 0 = the unconstrained
             registration. Needed by an absolute LiDAR factor (``fusion.lidar.factor``
             ``hybrid`` or ``prior``): without it the registration's slide along the axis
             leaks into the kept components and pins the axial position to the slide
@@ -83,7 +83,7 @@ class PipelineConfig:
     detection_points: int = 4000
     sensor_wait_s: float = 0.3
     max_pending_scans: int = 3
-    remap_iterations: int = 0
+    remap_iterations: int = 10
     detection_schedule: DetectionScheduleConfig = field(default_factory=DetectionScheduleConfig)
     scan_matcher: ScanMatcherConfig = field(default_factory=ScanMatcherConfig)
     fusion: FusionConfig = field(default_factory=FusionConfig)
@@ -187,7 +187,7 @@ class OdometryPipeline:
         """
         old = self.estimator
         self._matcher.reset()
-        self._schedule.reset()
+        self._schedule.reset(new_map=True)
         self._new_estimator()
         if keep_from is not None and self._last_stamp is not None:
             t1 = self._last_stamp - self.config.max_backward_jump_s
