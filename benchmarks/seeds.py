@@ -87,7 +87,8 @@ def _table(rows: list[dict], trials: list[int], seeds: list[int], configs: list[
             ate = [mine[s]["ate_m"] for s in seeds]
             rpe = [mine[s]["rpe_m"] for s in seeds]
             target = TARGETS.get(trial, {})
-            met = sum(a <= target.get("ate_m", float("inf")) and r <= target.get("rpe_m", float("inf"))
+            inf = float("inf")
+            met = sum(a <= target.get("ate_m", inf) and r <= target.get("rpe_m", inf)
                       for a, r in zip(ate, rpe))
             goal = " and ".join(f"{k[:3].upper()} <= {v}" for k, v in target.items())
             lines.append(f"| {trial} | `{config}` | " + " | ".join(cells)
@@ -128,10 +129,11 @@ def main(argv: list[str] | None = None) -> int:
              f"{args.resolution}, `lili`). Cells: ATE / RPE(100 m) [m] (evo; ATE SE(3)-aligned); "
              "target: runs meeting the issue's target.", "",
              *_table(rows, args.trials, args.seeds, args.configs)]
-    lines += ["", "Wheel scale (wheel odometry distance / true distance) of each run: the simulator's, "
-              "and the online estimate at the run's end (`scans.csv`), with its error; inside the "
-              "degenerate subspace the estimate divides the wheel distance, so an estimate 1 % "
-              "too high is 1 % of the degenerate distance short along the axis.", "",
+    lines += ["", "Wheel scale (wheel odometry distance / true distance) of each run: the "
+              "simulator's, and the online estimate at the run's end (`scans.csv`), with its "
+              "error; inside the degenerate subspace the estimate divides the wheel distance, "
+              "so an estimate 1 % too high is 1 % of the degenerate distance short along the "
+              "axis.", "",
               "| trial | seed | configuration | true | estimated | error | final error [m] |",
               "|---|---|---|---|---|---|---|"]
     for r in rows:

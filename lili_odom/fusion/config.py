@@ -53,16 +53,18 @@ class LidarNoiseConfig:
             solution remapping (``pipeline.remap_iterations``) and, when the odometry starts
             while moving, the detection hold of the map's first metres
             (``pipeline.detection_schedule``); with both it meets the Table II targets on
-            seed 0 but not over seeds (README; ``benchmarks/results/seeds.md``). Why the relative tilt matters on Trial 1 is not
-            established (suspected: the prior pins the tilt to the local map's, and the IMU's
-            gravity projection turns a tilt error into velocity along the axis).
+            seed 0 but not over seeds (README; ``benchmarks/results/seeds.md``). Why the
+            relative tilt matters on Trial 1 is not established (suspected: the prior pins
+            the tilt to the local map's, and the IMU's gravity projection turns a tilt error
+            into velocity along the axis).
             ``config/between_factor.yaml`` restores the earlier between-factor setup.
         basis_snap: components of a degenerate basis row below this fraction of its largest
             one are zeroed before the LiDAR information is restricted
             (:func:`lili_odom.fusion.subspace.snap_basis`); 0 = use the basis as detected.
-        anchor_sigma: with ``factor="prior"`` or ``"hybrid"`` and wheel odometry, the prior's degenerate
-            components are taken from the wheel-predicted pose and held with this sigma
-            (scaled twist units, m; :func:`lili_odom.fusion.subspace.degenerate_anchor`).
+        anchor_sigma: with ``factor="prior"`` or ``"hybrid"`` and wheel odometry, the
+            prior's degenerate components are taken from the wheel-predicted pose and held
+            with this sigma (scaled twist units, m;
+            :func:`lili_odom.fusion.subspace.degenerate_anchor`).
             Without it the position along the axis drifted against the wheels in the
             simulated tunnel (suspected cause: small spurious components of the detected
             basis, not confirmed in a synthetic test). The
