@@ -2,6 +2,7 @@
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from lili_odom.cli import main
@@ -24,7 +25,6 @@ def test_run_none_tracks_the_truth_and_writes_every_output(tmp_path, capsys):
     estimate_lines = (out / "estimate.tum").read_text().splitlines()
     assert len(estimate_lines) == result["scans_processed"]
     assert len(estimate_lines[0].split()) == 8
-    import numpy as np
     scans = np.genfromtxt(out / "scans.csv", delimiter=",", names=True)
     assert len(scans) == result["scans_processed"]
     # the online wheel distance scale per scan: 1 until calibrated, always within its range

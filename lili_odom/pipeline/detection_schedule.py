@@ -151,7 +151,7 @@ class DetectionSchedule:
         if 0 < cfg.hold_warmup_m < self._travelled:
             self._held = None
             return result
-        if np.linalg.norm((np.linalg.inv(held.pose) @ pose)[:3, 3]) > self.config.hold_distance_m:
+        if np.linalg.norm((np.linalg.inv(held.pose) @ pose)[:3, 3]) > cfg.hold_distance_m:
             self._held = None
             return result
         self._held_age += 1
