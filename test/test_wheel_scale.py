@@ -68,6 +68,34 @@ def test_a_wheel_slip_rejects_its_segment_and_a_wrong_estimate_is_restarted():
     assert est.restarts == 1 and est.scale == pytest.approx(1.10, rel=1e-6)
 
 
+def test_a_slip_before_the_estimate_exists_does_not_carry_its_segment():
+    """Five segments, the first with 20 cm of wheel slip (3.3 %) before there is an estimate
+    to gate it: the plain mean comes out 0.7 % long, the Huber estimate about 0.4 %."""
+    def run(robust_ratio: float) -> float:
+        est = WheelScaleEstimator(WheelScaleConfig(robust_ratio=robust_ratio))
+        drive(est, 60, 0.1, 0.1)  # 1 s to a steady start, then the first segment
+        drive(est, 10, 0.12, 0.1)  # one second of spinning wheels
+        drive(est, 40, 0.1, 0.1)
+        drive(est, 200, 0.1, 0.1)
+        assert est.used == 5 and est.rejected == 0
+        return est.scale
+
+    assert run(0.0) == pytest.approx(1.0072, abs=2e-4)
+    assert abs(run(0.015) - 1.0) < 0.0045
+
+
+def test_honest_segments_scattered_by_registration_error_average_as_before():
+    """Segments within the Huber threshold of each other give their distance-weighted mean."""
+    est = WheelScaleEstimator(WheelScaleConfig(segment_m=2.0))
+    for ratio in (1.01, 1.0, 1.02, 1.0, 1.01, 1.02):
+        drive(est, 32, 0.1 * ratio, 0.1)
+        est.interrupt()
+    ratios = [s.ratio for s in est.segments]
+    weights = [s.lidar * np.exp(-(est.travel - s.travel) / 200.0) for s in est.segments]
+    assert len(ratios) == 6
+    assert est.scale == pytest.approx(np.average(ratios, weights=weights), rel=1e-9)
+
+
 def test_a_broken_chain_keeps_its_steady_part_and_short_pieces_are_dropped():
     est = WheelScaleEstimator(WheelScaleConfig(min_distance_m=0.0, segment_m=5.0,
                                                min_segment_m=2.0))
@@ -106,8 +134,8 @@ def test_stationary_and_non_finite_increments_are_ignored_and_scale_is_clamped()
                                                segment_m=1.0, min_segment_m=1.0))
     drive(est, 60, 0.108, 0.1)
     assert est.scale == pytest.approx(1.08, rel=1e-6)
-    est.wheel_m *= 1.1  # an estimate beyond the range is clamped
-    assert est.scale == 1.1
+    drive(est, 300, 0.112, 0.1)  # inside the slip gate, the estimate moves beyond the range
+    assert est.rejected == 0 and est.scale == 1.1
 
 
 def test_disabled_estimator_never_scales():

@@ -27,9 +27,18 @@ rest would otherwise put its shortfall into the first segment.
 
 Segments that disagree with the current estimate by more than the slip gate are not used
 (wheels spinning, bad registration); after ``max_rejections`` rejected segments in a row the
-estimate itself is taken to be wrong and restarted. Each segment counts with its distance;
-older travel fades with ``window_m`` so a changed surface is followed. Until
+estimate itself is taken to be wrong and restarted. Each segment counts with its LiDAR
+distance; older travel fades with ``window_m`` so a changed surface is followed. Until
 ``min_distance_m`` of accepted travel was seen, the scale is 1.
+
+The scale is a Huber M-estimate of the segments' ratios (threshold ``robust_ratio``), not their
+plain distance-weighted mean. A slip event (the wheels over-read by tens of percent for a
+second, on grass, mud or a wet floor) inside a segment raises its ratio by a few percent, and
+the first segments, before the estimate exists, have no slip gate to stop it. With only a few
+segments before a featureless stretch, one such segment moves a plain mean by about a percent,
+which the featureless stretch then turns into drift, while the registrations' endpoint errors
+scatter honest segments by about a percent too. The Huber estimate is the mean while the
+segments agree within ``robust_ratio`` and bounds the pull of one that does not.
 
 Frames and units: increments are 4x4 motions of base_link from the previous scan, expressed
 in base_link at the previous scan [m]; the scale is dimensionless.
@@ -42,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["WheelScaleConfig", "WheelScaleEstimator"]
+__all__ = ["ClosedSegment", "WheelScaleConfig", "WheelScaleEstimator"]
 
 
 @dataclass
@@ -63,6 +72,8 @@ class WheelScaleConfig:
             scale times its LiDAR distance by more than ``slip_gate_m + slip_gate_ratio *
             distance`` is not used.
         max_rejections: that many rejected segments in a row restart the estimate.
+        robust_ratio: Huber threshold on a segment's ratio's deviation from the estimate
+            (dimensionless; 0.015 = 1.5 %); 0 = plain distance-weighted mean.
     """
 
     enabled: bool = True
@@ -77,6 +88,7 @@ class WheelScaleConfig:
     slip_gate_m: float = 0.05
     slip_gate_ratio: float = 0.03
     max_rejections: int = 3
+    robust_ratio: float = 0.015
 
     def validate(self, prefix: str = "wheel_scale.") -> None:
         from lili_odom.errors import check_range
@@ -93,6 +105,7 @@ class WheelScaleConfig:
         check_range(prefix + "slip_gate_m", self.slip_gate_m, 0.0, 10.0, unit="m")
         check_range(prefix + "slip_gate_ratio", self.slip_gate_ratio, 0.0, 10.0)
         check_range(prefix + "max_rejections", self.max_rejections, 1, 1000)
+        check_range(prefix + "robust_ratio", self.robust_ratio, 0.0, 1.0)
 
 
 class _Segment:
@@ -105,19 +118,34 @@ class _Segment:
         self.end: tuple[np.ndarray, np.ndarray, float] | None = None  # last steady end
 
 
+@dataclass(frozen=True)
+class ClosedSegment:
+    """A used segment: wheel and LiDAR distance [m] and the accepted travel [m] at its close."""
+
+    wheel: float
+    lidar: float
+    travel: float
+
+    @property
+    def ratio(self) -> float:
+        return self.wheel / self.lidar
+
+
 class WheelScaleEstimator:
     """Running estimate of the wheel distance scale (see module docstring)."""
 
     def __init__(self, config: WheelScaleConfig | None = None) -> None:
         self.config = config or WheelScaleConfig()
-        self.wheel_m = 0.0   # faded sum of segment wheel distances [m]
-        self.lidar_m = 0.0   # faded sum of segment LiDAR distances along the wheel chord [m]
+        self.segments: deque[ClosedSegment] = deque()  # used segments, oldest first
+        self.travel = 0.0    # wheel distance of all used segments [m]
         self.used = 0        # segments used
         self.rejected = 0    # segments rejected by the slip gate
         self.restarts = 0    # estimates restarted after repeated rejections
         self._segment: _Segment | None = None
         self._steps: deque[float] = deque(maxlen=self.config.steady_scans)  # wheel steps [m]
         self._rejections_in_row = 0
+        self._estimate = 1.0  # robust ratio of the current segments (unclamped)
+        self._lidar_m = 0.0   # their faded LiDAR distance (the fading only moves at a close)
 
     # -- feeding -------------------------------------------------------------------------
 
@@ -190,22 +218,55 @@ class WheelScaleEstimator:
             self._rejections_in_row += 1
             if self._rejections_in_row >= cfg.max_rejections:
                 # the segments keep disagreeing with the estimate: the estimate is wrong
-                self.wheel_m = self.lidar_m = 0.0
+                self.segments.clear()
+                self._estimate, self._lidar_m = 1.0, 0.0
                 self.restarts += 1
                 self._rejections_in_row = 0
             return
         self._rejections_in_row = 0
-        fade = math.exp(-w / cfg.window_m)
-        self.wheel_m = self.wheel_m * fade + w
-        self.lidar_m = self.lidar_m * fade + along
+        self.travel += w
+        self.segments.append(ClosedSegment(wheel=w, lidar=along, travel=self.travel))
+        while self.segments and self._fade(self.segments[0]) < 1e-3:
+            self.segments.popleft()
         self.used += 1
+        self._estimate = self._robust_ratio()
+        self._lidar_m = float(sum(self._fade(s) * s.lidar for s in self.segments))
+
+    def _fade(self, seg: ClosedSegment) -> float:
+        return math.exp(-(self.travel - seg.travel) / self.config.window_m)
+
+    def _robust_ratio(self) -> float:
+        """Huber M-estimate of the segments' ratios, weighted by faded LiDAR distance."""
+        if not self.segments:
+            return 1.0
+        r = np.array([s.ratio for s in self.segments])
+        w = np.array([self._fade(s) * s.lidar for s in self.segments])
+        c = self.config.robust_ratio
+        if c <= 0.0 or len(r) < 3:  # the plain ratio of the faded distances
+            return float(np.sum(w * r) / np.sum(w))
+        order = np.argsort(r)  # start at the weighted median
+        cum = np.cumsum(w[order])
+        est = float(r[order][np.searchsorted(cum, 0.5 * cum[-1])])
+        for _ in range(50):
+            dev = np.abs(r - est)
+            u = w * np.minimum(1.0, c / np.maximum(dev, 1e-12))
+            new = float(np.sum(u * r) / np.sum(u))
+            if abs(new - est) < 1e-9:
+                return new
+            est = new
+        return est
 
     # -- result --------------------------------------------------------------------------
 
     @property
+    def lidar_m(self) -> float:
+        """Faded LiDAR distance of the used segments [m]."""
+        return self._lidar_m
+
+    @property
     def established(self) -> bool:
         """True once enough constrained travel was accepted for the estimate to apply."""
-        return self.lidar_m >= self.config.min_distance_m and self.lidar_m > 0
+        return self._lidar_m >= self.config.min_distance_m and self._lidar_m > 0
 
     @property
     def scale(self) -> float:
@@ -213,7 +274,7 @@ class WheelScaleEstimator:
         cfg = self.config
         if not cfg.enabled or not self.established:
             return 1.0
-        return float(np.clip(self.wheel_m / self.lidar_m, cfg.min_scale, cfg.max_scale))
+        return float(np.clip(self._estimate, cfg.min_scale, cfg.max_scale))
 
     def correct(self, wheel_delta: np.ndarray) -> np.ndarray:
         """``wheel_delta`` with its translation divided by the scale (a new array)."""
