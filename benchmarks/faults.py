@@ -345,6 +345,12 @@ def render(data: dict) -> str:
     if runs_all:
         L.append(f"- Fault runs: {len(runs_all)}; crashes {crashes}, native aborts {aborts}, "
                  f"timeouts {sum(r.get('status') == 'timeout' for r in runs_all)}.")
+    play_runs = (data.get("play_rates") or {}).get("runs", [])
+    if play_runs:
+        bad = [f"`{r.get('method')}` {r.get('rate'):g}x: {r.get('status')}" for r in play_runs
+               if r.get("status") != "ok"]
+        L.append(f"- Play runs: {len(play_runs)}; not ok: {', '.join(bad) if bad else 'none'}"
+                 " (the stderr tail of each is in the JSON).")
     L.append("")
     if tests:
         L += ["## Bad input (tests)", "",
@@ -406,11 +412,12 @@ def render(data: dict) -> str:
               "pipeline) and a recorder of `/lili_odom/odometry`. Nothing lost = every "
               "published scan reached the node's callback, none was dropped, one odometry "
               "message each.", "",
-              "| method | rate | published | received | processed | dropped | no output "
-              "| odometry | nothing lost | drops accounted | mean processing [s] |",
-              "|---" * 11 + "|"]
+              "| method | rate | status | published | received | processed | dropped "
+              "| no output | odometry | nothing lost | drops accounted | mean processing [s] |",
+              "|---" * 12 + "|"]
         for r in pr["runs"]:
-            L.append(f"| {r.get('method')} | {r.get('rate')} | {r.get('published', '-')} | "
+            L.append(f"| {r.get('method')} | {r.get('rate')} | {r.get('status', '-')} | "
+                     f"{r.get('published', '-')} | "
                      f"{r.get('received', '-')} | {r.get('processed', '-')} | "
                      f"{r.get('dropped', '-')} | {r.get('no_output', '-')} | "
                      f"{r.get('odometry', '-')} | {'yes' if r.get('nothing_lost') else 'no'} "
