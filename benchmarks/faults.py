@@ -116,14 +116,18 @@ def run_in_subprocess(kind: str, job: dict, timeout: float) -> dict:
         status = f"native abort (signal {-proc.returncode})"
     elif proc.returncode != 0:
         status = "crash"
-    out = {}
-    if status == "ok":
-        try:
-            out = json.loads(proc.stdout.strip().splitlines()[-1])
-        except (ValueError, IndexError):
-            status = "crash"
+    try:
+        out = json.loads(proc.stdout.strip().splitlines()[-1])
+    except (ValueError, IndexError):
+        out = None
+    if out is None:
+        status = "crash" if status == "ok" else status
+        out = {**job}
+    elif status != "ok":
+        # the worker printed its complete result, then died while the interpreter exited
+        status += " at exit, after the result"
     if status != "ok":
-        out = {**job, "stderr_tail": proc.stderr[-1500:]}
+        out["stderr_tail"] = proc.stderr[-1500:]
     out["status"] = status
     return out
 
@@ -211,7 +215,8 @@ def worker_play(job: dict) -> dict:
     executor = SingleThreadedExecutor(context=ctx)
     executor.add_node(node)
     executor.add_node(recorder)
-    threading.Thread(target=executor.spin, daemon=True).start()
+    spin = threading.Thread(target=executor.spin, daemon=True)
+    spin.start()
     try:
         t0 = time.monotonic()
         play = subprocess.run([sys.executable, "-m", "lili_odom.cli", "play", str(CI_BAG),
@@ -230,11 +235,16 @@ def worker_play(job: dict) -> dict:
         time.sleep(0.3)
         diag = node.diagnostics()
     finally:
+        # the spin thread must be out of rclpy's wait before the interpreter exits: a daemon
+        # thread still inside it at exit aborts the process (ros2/rclpy#1484)
         executor.shutdown(timeout_sec=2.0)
+        spin.join(5.0)
         node.destroy_node()
         recorder.destroy_node()
         rclpy.try_shutdown(context=ctx)
+        spin.join(5.0)
     return {"method": job["method"], "rate": job["rate"], "play_ok": play.returncode == 0,
+            "spin_thread_left": spin.is_alive(),
             "play_s": play_s, "published": published, "received": diag["scans_received"],
             "processed": diag["scans_processed"], "dropped": diag["scans_dropped"],
             "no_output": diag["scans_no_output"], "errors": diag["scan_errors"],
