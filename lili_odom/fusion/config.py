@@ -66,9 +66,8 @@ class LidarNoiseConfig:
             with this sigma (scaled twist units, m;
             :func:`lili_odom.fusion.subspace.degenerate_anchor`).
             Without it the LiDAR information kept next to a detected direction moves the
-            position along it: the basis carries spurious components of a few hundredths
-            (lateral, vertical) that change scan to scan, so the well-measured directions
-            the factor keeps are tilted towards the axis. On the simulated tunnel the fused
+            position along it: the basis carries small spurious off-axis components, so the
+            well-measured directions the factor keeps are tilted towards the axis. On the simulated tunnel the fused
             forward increment then strays from the wheels' by 1.5 cm per scan (std), 0.2 cm
             with the anchor at 0.05 (``benchmarks/along_axis_jitter.py``). The reported
             covariance adds the wheel random walk along the subspace, which the anchor would
