@@ -40,11 +40,12 @@ RESULTS = ROOT / "benchmarks" / "results"
 
 #: The settings compared by default (overrides below ``pipeline.``).
 DEFAULT_SETTINGS = {
-    "anchor_0.05": {"fusion.lidar.anchor_sigma": 0.05},
+    "defaults": {},
     "no_anchor": {"fusion.lidar.anchor_sigma": 0.0},
-    "no_anchor_snap_0.2": {"fusion.lidar.anchor_sigma": 0.0, "fusion.lidar.basis_snap": 0.2},
-    "between_factor": {"fusion.lidar.factor": "between", "fusion.lidar.anchor_sigma": 0.0},
-    "no_anchor_no_imu": {"fusion.lidar.anchor_sigma": 0.0, "fusion.use_imu": False},
+    "marginalized_wheels": {"fusion.wheel_restriction": "same", "fusion.lidar.anchor_sigma": 0.0},
+    "marginalized_wheels_anchor": {"fusion.wheel_restriction": "same"},
+    "projected_wheels": {"fusion.wheel_restriction": "project", "fusion.lidar.anchor_sigma": 0.0},
+    "between_factor": {"fusion.lidar.factor": "between"},
 }
 
 

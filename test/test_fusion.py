@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 
 from lili_odom.fusion import FusionConfig, FusionEstimator, ImuBuffer, split_information
+from lili_odom.fusion.config import LidarNoiseConfig
 from lili_odom.fusion.imu import ImuNoiseConfig, gravity_alignment, integrate, make_preintegration_params
 from lili_odom.fusion.subspace import scaled_lidar_to_base, sqrt_information
+from lili_odom.fusion.wheel import wheel_information
 from lili_odom.geometry import exp, log, scaling_matrix
 
 G = 9.80665
@@ -115,12 +117,19 @@ def test_extrinsic_yaw_180_translation() -> None:
     np.testing.assert_allclose(out.pose[:3, 3], [1.0, 0.3, 0.0], atol=0.01)
 
 
+@pytest.mark.parametrize("wheel_restriction", ["marginalize", "weighted"])
 @pytest.mark.parametrize("mount", [np.eye(4), MOUNT])
-def test_coupled_rotation_translation_direction(mount: np.ndarray) -> None:
+def test_coupled_rotation_translation_direction(mount: np.ndarray, wheel_restriction: str
+                                                ) -> None:
     L = 8.0
     b = np.array([0.0, 1.0, 0.0, 0.0, 0.0, 1.0])  # scaled: y translation + yaw (L * wz)
     b /= np.linalg.norm(b)
-    est = FusionEstimator(config(T_base_lidar=mount))
+    # the split alone: the anchor re-centres the LiDAR factor on the wheel-remapped pose and
+    # uses its information in that frame, which for this 14 deg, 0.5 m disagreement costs
+    # 1-2 cm outside b (second order; per-scan disagreements are millimetres)
+    cfg = config(T_base_lidar=mount, wheel_restriction=wheel_restriction,
+                 lidar=LidarNoiseConfig(anchor_sigma=0.0))
+    est = FusionEstimator(cfg)
     est.initialize(0.0)
     lidar = exp(np.array([0.5, -0.2, 0.0, 0.0, 0.0, 0.15]))
     wheel = exp(np.array([0.45, 0.3, 0.0, 0.0, 0.0, -0.1]))
@@ -132,9 +141,14 @@ def test_coupled_rotation_translation_direction(mount: np.ndarray) -> None:
     s_lidar = Minv @ log(np.linalg.inv(lidar) @ delta)  # LiDAR factor error, scaled LiDAR coords
     s_wheel = Minv @ log(np.linalg.inv(wheel) @ delta)
     P = np.outer(b, b)
-    # LiDAR satisfied outside the subspace, wheels inside it (residual << the 0.5 m conflict)
+    # LiDAR satisfied outside the subspace, wheels inside it (residual << the 0.5 m conflict):
+    # the wheel residual's component along b, orthogonal or weighted by the wheels' own
+    # information (their least-squares fit along b)
     assert np.linalg.norm((np.eye(6) - P) @ s_lidar) < 2e-3
-    assert abs(b @ s_wheel) < 2e-3
+    W = np.eye(6)
+    if wheel_restriction == "weighted":
+        W = M.T @ wheel_information(wheel, cfg.wheel) @ M
+    assert abs(b @ W @ s_wheel) / math.sqrt(b @ W @ b) < 2e-3
     # and the two measurements really disagreed along b
     assert abs(b @ (Minv @ log(np.linalg.inv(lidar) @ wheel))) > 0.3
 
@@ -158,6 +172,40 @@ def test_split_information_properties() -> None:
         assert abs(other @ sp.wheel @ other) < 1e-9 * w.max()
     R = sqrt_information(sp.wheel)
     np.testing.assert_allclose(R.T @ R, sp.wheel, atol=1e-6 * w.max())
+
+
+def test_weighted_wheel_restriction_measures_the_axis_with_what_the_wheels_measure() -> None:
+    """A detected tunnel axis mixing pitch into the translation: the wheels measure the
+    forward distance well and pitch badly. ``marginalize`` weakens them along the whole
+    direction, ``project`` lets their (unmeasured) pitch move it, ``weighted`` does neither."""
+    L = 10.0
+    mount = np.eye(4)
+    basis = np.array([[0.92, 0.0, 0.0, 0.0, 0.39, 0.0]])
+    basis /= np.linalg.norm(basis)
+    om_l = np.diag([2500.0] * 3 + [1e5] * 3)
+    om_w = np.diag([1.0 / 0.008**2, 1e4, 1e4, 1.0 / 0.016**2, 1.0 / 0.016**2, 1e4])
+    M = scaled_lidar_to_base(mount, L)
+    u = M @ basis[0]  # base twist of the unit scaled direction
+    pitch_only = np.array([0.0, 0.0, 0.0, 0.0, 0.01, 0.0])  # residual the wheels cannot see
+    forward = np.array([0.01, 0.0, 0.0, 0.0, 0.0, 0.0])
+    sp = {mode: split_information(om_l, om_w, basis, L, mount, wheel_mode=mode).wheel
+          for mode in ("marginalize", "project", "weighted")}
+    # information along the axis: marginalize is weak (about (0.39 L 0.016)^-2), the others
+    # keep the wheels' forward precision
+    assert u @ sp["marginalize"] @ u < 0.02 * (u @ sp["project"] @ u)
+    assert u @ sp["weighted"] @ u == pytest.approx(u @ sp["project"] @ u, rel=1e-9)
+    # a 0.01 rad pitch disagreement costs the weighted factor no more than the 8 mm the
+    # wheels' pitch noise is worth, but costs the projected one like a 4 cm slide
+    cost = {m: float(pitch_only @ sp[m] @ pitch_only) for m in sp}
+    assert cost["weighted"] < 0.6 * float(forward @ sp["weighted"] @ forward)
+    assert cost["project"] > 10 * cost["weighted"]
+    # a forward disagreement is penalised with the wheels' forward precision
+    assert float(forward @ sp["weighted"] @ forward) == pytest.approx(
+        0.01**2 / 0.008**2, rel=0.05)
+    w = np.linalg.eigvalsh(sp["weighted"])
+    assert np.count_nonzero(w > 1e-9 * w.max()) == 1  # one scalar measurement
+    with pytest.raises(ValueError, match="wheel_restriction"):
+        FusionConfig(wheel_restriction="oblique").validate()
 
 
 # --------------------------------------------------------------------------------------------

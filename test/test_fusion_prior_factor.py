@@ -51,6 +51,29 @@ def test_anchor_takes_degenerate_components_from_the_reference(mount: np.ndarray
     assert s @ weaker @ s < 0.5 * (s @ omega @ s)
 
 
+@pytest.mark.parametrize("mount", [np.eye(4), MOUNT])
+def test_anchor_weighted_by_the_reference_ignores_a_tilt_it_does_not_measure(
+        mount: np.ndarray) -> None:
+    """The wheel prediction knows the distance but not the roll; a detected axis carrying
+    some roll must take the distance from it, not trade it against the roll disagreement."""
+    L = 14.0
+    basis = np.array([[0.95, 0.0, 0.0, 0.3, 0.0, 0.0]])  # scaled LiDAR twist: x with some roll
+    basis /= np.linalg.norm(basis)
+    axis = (scaled_lidar_to_base(mount, L) @ basis[0])[:3]  # base direction of its translation
+    axis /= np.linalg.norm(axis)
+    T_meas = np.eye(4)
+    T_ref = exp(np.r_[0.09 * axis, 0.0, 0.0, 0.0]) @ exp(np.array([0, 0, 0, 0.02, 0, 0]))
+    wheel_info = np.diag([1 / 0.008**2] * 3 + [1 / 0.016**2] * 2 + [1 / 0.002**2])
+    plain, _ = degenerate_anchor(T_meas, T_ref, basis, L, mount, sigma=0.05)
+    weighted, omega = degenerate_anchor(T_meas, T_ref, basis, L, mount, sigma=0.05,
+                                        reference_information=wheel_info)
+    # unweighted, 0.02 rad of roll (0.28 m scaled) moves the target along the axis as much
+    assert abs(plain[:3, 3] @ axis - 0.09) > 0.05
+    # weighted, the target moves the wheels' 9 cm along the axis (up to the roll it implies)
+    assert weighted[:3, 3] @ axis == pytest.approx(0.09, abs=0.005)
+    assert np.linalg.matrix_rank(omega, tol=1e-6 * np.abs(omega).max()) == 1
+
+
 def test_prior_factor_reports_the_wheel_random_walk_along_the_axis() -> None:
     v = np.array([1.0, 0.0, 0.0])
     est = FusionEstimator(config(lidar=LidarNoiseConfig(factor="prior")))

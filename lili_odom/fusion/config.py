@@ -14,6 +14,7 @@ __all__ = ["LidarNoiseConfig", "FusionConfig", "ImuNoiseConfig", "WheelNoiseConf
 
 ROBUST_KERNELS = ("none", "huber", "cauchy")
 RESTRICTIONS = ("marginalize", "project")
+WHEEL_RESTRICTIONS = ("same", *RESTRICTIONS, "weighted")
 LIDAR_FACTORS = ("prior", "between", "hybrid")
 
 
@@ -52,8 +53,8 @@ class LidarNoiseConfig:
             pitch (each with the information restricted to those directions). It needs
             solution remapping (``pipeline.remap_iterations``) and, when the odometry starts
             while moving, the detection hold of the map's first metres
-            (``pipeline.detection_schedule``); with both it meets the Table II targets on
-            seed 0 but not over seeds (README; ``benchmarks/results/seeds.md``). Why the
+            (``pipeline.detection_schedule``); results over seeds in
+            ``benchmarks/results/seeds.md``. Why the
             relative tilt matters on Trial 1 is not established (suspected: the prior pins
             the tilt to the local map's, and the IMU's gravity projection turns a tilt error
             into velocity along the axis).
@@ -67,12 +68,14 @@ class LidarNoiseConfig:
             :func:`lili_odom.fusion.subspace.degenerate_anchor`).
             Without it the LiDAR information kept next to a detected direction moves the
             position along it: the basis carries small spurious off-axis components, so the
-            well-measured directions the factor keeps are tilted towards the axis. On the simulated tunnel the fused
-            forward increment then strays from the wheels' by 1.5 cm per scan (std), 0.2 cm
-            with the anchor at 0.05 (``benchmarks/along_axis_jitter.py``). The reported
+            well-measured directions the factor keeps are tilted towards the axis, and on
+            the simulated tunnel the fused forward increment strays from the wheels'
+            (``benchmarks/results/along_axis_jitter.md``). The wheel
+            prediction's components along the subspace are its own weighted fit
+            (``reference_information``): wheels measure no roll or pitch, and a detected
+            axis carrying some would otherwise trade them against the distance. The reported
             covariance adds the wheel random walk along the subspace, which the anchor would
-            otherwise hide. 0 (default) = no anchor; 0.05 in ``config/degenerate_anchor.yaml``
-            (not the default: it fails a featureless start-while-moving test, below).
+            otherwise hide. 0.05 (default); 0 = no anchor (``config/no_anchor.yaml``).
         robust_after_updates: the kernel is off for this many updates after (re)initialisation
             or after an interval whose IMU samples reach 95 % of the sensor range (then the
             velocity is not observed or corrupt, so the IMU prediction cannot be trusted; such
@@ -88,7 +91,7 @@ class LidarNoiseConfig:
     robust_threshold: float = 3.0
     robust_after_updates: int = 20
     factor: str = "hybrid"
-    anchor_sigma: float = 0.0
+    anchor_sigma: float = 0.05
     basis_snap: float = 0.0
 
     def validate(self, prefix: str = "lidar.") -> None:
@@ -161,6 +164,13 @@ class FusionConfig:
             (:mod:`lili_odom.fusion.wheel_scale`).
         wheel_weak_scale: factor on the wheel information outside the degenerate subspace
             (0 = wheels act only inside it, and not at all when nothing is degenerate).
+        wheel_restriction: how the wheel information is restricted to the degenerate
+            subspace: ``"weighted"`` (default), the wheels' own weighted estimate of the
+            motion along the subspace (:func:`lili_odom.fusion.subspace.weighted_restriction`),
+            so a detected direction that mixes tilt into the translation is neither weakened
+            by the wheels' unknown tilt nor moved by it; ``"same"`` as the LiDAR's
+            (``lidar.restriction``; ``config/marginalized_wheels.yaml``), ``"marginalize"``
+            or ``"project"``.
         no_imu_sigma_translation_per_s: fallback motion-model sigma [m per s of interval].
         no_imu_sigma_rotation_per_s: fallback motion-model sigma [rad per s of interval].
         no_imu_sigma_floor_translation: [m] floor of the fallback translation sigma.
@@ -198,6 +208,7 @@ class FusionConfig:
     gravity_window_s: float = 1.0
     estimate_gyro_bias_at_rest: bool = True
     wheel_weak_scale: float = 0.0
+    wheel_restriction: str = "weighted"
     no_imu_sigma_translation_per_s: float = 1.0
     no_imu_sigma_rotation_per_s: float = 0.5
     no_imu_sigma_floor_translation: float = 0.05
@@ -230,6 +241,9 @@ class FusionConfig:
         check_range(prefix + "gravity_window_s", self.gravity_window_s, 0.0, 60.0, lo_open=True,
                     unit="s")
         check_range(prefix + "wheel_weak_scale", self.wheel_weak_scale, 0.0, 1.0)
+        if self.wheel_restriction not in WHEEL_RESTRICTIONS:
+            raise ValueError(f"{prefix}wheel_restriction must be one of "
+                             f"{', '.join(WHEEL_RESTRICTIONS)}, got {self.wheel_restriction!r}")
         check_range(prefix + "max_interval_s", self.max_interval_s, 0.0, 3600.0, lo_open=True,
                     unit="s")
         check_range(prefix + "reset_every", self.reset_every, 1, 100000)

@@ -17,7 +17,8 @@ Factors between consecutive states ``i-1 -> i``:
   the form: ``"between"``, a ``BetweenFactorPose3`` with the relative measurement
   ``Z = T_fused(i-1)^-1 T_icp`` against the previous **fused** pose; or ``"prior"``
   (experimental), a ``PriorFactorPose3`` at ``T_icp`` whose degenerate components are taken
-  from the wheel prediction (solution remapping) and held with ``lidar.anchor_sigma``. The
+  from the wheel prediction (solution remapping, weighted by the wheels' information) and held
+  with ``lidar.anchor_sigma``. The
   relative form counts a correction twice when iSAM2 later moves ``X(i-1)`` (the new pose
   is dragged along and the next registration corrects it back), so the estimate oscillates
   across the tunnel scan to scan; the absolute form does not, but is sensitive to spurious
@@ -26,8 +27,10 @@ Factors between consecutive states ``i-1 -> i``:
   adds the prior restricted to translation and yaw and the between factor restricted to roll
   and pitch.
 * Wheel ``BetweenFactorPose3`` whose information lives only inside the degenerate subspace
-  (the paper's solution remapping, as a factor). Without degeneracy there is no wheel factor
-  unless ``wheel_weak_scale`` > 0. The increment's distance is first divided by the wheel
+  (the paper's solution remapping, as a factor): by default the wheels' own weighted fit of
+  the motion along it (``wheel_restriction``, :func:`lili_odom.fusion.subspace.weighted_restriction`),
+  so the roll and pitch they do not measure neither weaken nor move it. Without degeneracy
+  there is no wheel factor unless ``wheel_weak_scale`` > 0. The increment's distance is first divided by the wheel
   scale estimated online from fully constrained registrations
   (:mod:`lili_odom.fusion.wheel_scale`), since inside the subspace a scale error is drift.
 
@@ -503,7 +506,7 @@ class FusionEstimator:
             split = split_information(
                 omega_lidar, omega_wheel, basis, length, self.T_base_lidar,
                 epsilon=cfg.lidar.degenerate_epsilon, wheel_weak_scale=cfg.wheel_weak_scale,
-                mode=cfg.lidar.restriction,
+                mode=cfg.lidar.restriction, wheel_mode=cfg.wheel_restriction,
             )
         else:  # nothing from the LiDAR: every direction is "degenerate"
             split = split_information(
@@ -518,7 +521,8 @@ class FusionEstimator:
                 and cfg.lidar.anchor_sigma > 0.0):
             lidar_target, omega_anchor = degenerate_anchor(
                 T_meas, T_prev @ delta_w, basis, length, self.T_base_lidar,
-                cfg.lidar.anchor_sigma, reference_covariance=_from_gtsam_matrix(prev.cov_gtsam))
+                cfg.lidar.anchor_sigma, reference_covariance=_from_gtsam_matrix(prev.cov_gtsam),
+                reference_information=omega_wheel)
             lidar_info = split.lidar + omega_anchor
             # the anchor is an absolute pseudo-measurement: the graph's marginal along the
             # subspace stops growing, so the wheel random walk is added to the reported one

@@ -44,6 +44,7 @@ __all__ = [
     "split_information",
     "sqrt_information",
     "remap_pose",
+    "weighted_restriction",
     "degenerate_anchor",
     "snap_basis",
     "covariance_along",
@@ -117,6 +118,31 @@ def restrict_information(
     return keep.T @ o_kk @ keep
 
 
+def weighted_restriction(omega: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """The information of a measurement's own estimate of its ``keep`` components.
+
+    ``omega D^T (D omega D^T)^-1 D omega`` with ``D = keep``: the factor penalises the
+    measurement's weighted least-squares fit of the residual inside span(keep), so its
+    components along the subspace are decided by what the measurement measures well. A
+    detected tunnel axis mixes a little roll or pitch into the translation; restricted with
+    ``"project"``, the wheels' "no tilt change" (which they do not measure) would move the
+    position along the axis; restricted with ``"marginalize"``, their weak tilt makes them
+    weak along the whole direction (8 cm instead of 8 mm per scan for 0.4 scaled pitch),
+    and the IMU then decides the distance. The information along span(keep) equals
+    ``"project"``'s; it has rank ``len(keep)`` but is not supported on span(keep).
+
+    Args:
+        omega: 6x6 PSD information in coordinates where ``keep`` is orthonormal.
+        keep: (k, 6) orthonormal rows.
+    """
+    if keep.shape[0] == 0:
+        return np.zeros((6, 6))
+    normal = keep @ omega @ keep.T
+    inv = np.linalg.pinv(0.5 * (normal + normal.T), rcond=1e-12, hermitian=True)
+    out = omega @ keep.T @ inv @ keep @ omega
+    return 0.5 * (out + out.T)
+
+
 @dataclass
 class SubspaceSplit:
     """LiDAR and wheel information of one increment, both 6x6 ``(v, w)`` in base_link.
@@ -146,6 +172,7 @@ def split_information(
     epsilon: float = 1e-6,
     wheel_weak_scale: float = 0.0,
     mode: str = "marginalize",
+    wheel_mode: str = "same",
 ) -> SubspaceSplit:
     """Remove the degenerate directions from the LiDAR information and give them to the wheels.
 
@@ -162,6 +189,8 @@ def split_information(
         wheel_weak_scale: factor on the wheel information *outside* the degenerate subspace
             (0 = none: the wheels then only act inside it).
         mode: ``"marginalize"`` or ``"project"`` (see module docstring).
+        wheel_mode: how the wheel information is restricted to the subspace: ``"same"`` as
+            the LiDAR's (``mode``), or ``"weighted"`` (:func:`weighted_restriction`).
     """
     M = scaled_lidar_to_base(T_base_lidar, length)
     Minv = np.linalg.inv(M)
@@ -184,7 +213,12 @@ def split_information(
     if omega_wheel is not None:
         om_w = M.T @ omega_wheel @ M
         om_w = 0.5 * (om_w + om_w.T)
-        part = restrict_information(om_w, deg, ok, mode) if deg.shape[0] else np.zeros((6, 6))
+        if not deg.shape[0]:
+            part = np.zeros((6, 6))
+        elif wheel_mode == "weighted":
+            part = weighted_restriction(om_w, deg)
+        else:
+            part = restrict_information(om_w, deg, ok, mode if wheel_mode == "same" else wheel_mode)
         if wheel_weak_scale > 0.0 and ok.shape[0] > 0:
             part = part + wheel_weak_scale * restrict_information(om_w, ok, deg, mode)
         if np.any(part != 0.0):
@@ -206,22 +240,33 @@ def sqrt_information(omega: np.ndarray, rel_tol: float = 1e-12) -> np.ndarray:
 
 
 def remap_pose(T: np.ndarray, T_ref: np.ndarray, basis_scaled: np.ndarray, length: float,
-               iterations: int = 3) -> np.ndarray:
+               iterations: int = 3, weight: np.ndarray | None = None) -> np.ndarray:
     """LiDAR pose ``T`` (4x4) moved along the degenerate subspace onto ``T_ref``'s degenerate
     components (solution remapping of a pose).
 
-    ``basis_scaled`` rows are scaled twists ``(v, L w)`` in the LiDAR body frame. Solves
-    ``B S log((T exp(xi))^-1 T_ref) = 0`` for ``xi`` in the subspace by fixed-point steps (one
-    is exact when ``T`` and ``T_ref`` differ by a motion inside the subspace).
+    ``basis_scaled`` rows are scaled twists ``(v, L w)`` in the LiDAR body frame. Without
+    ``weight``, solves ``B S log((T exp(xi))^-1 T_ref) = 0`` for ``xi`` in the subspace by
+    fixed-point steps (one is exact when ``T`` and ``T_ref`` differ by a motion inside the
+    subspace). With ``weight`` (6x6 PSD metric on scaled LiDAR twists, e.g. the reference's
+    information), the step along the subspace is the weighted least-squares fit of the
+    difference ``S log(T^-1 T_ref)``: a detected direction mixes a little rotation into the
+    translation, and a reference that does not know that rotation (wheel odometry knows no
+    roll or pitch) must not decide the position along the direction through it.
     """
     B = orthonormal_rows(basis_scaled)
     T = orthonormalize(np.asarray(T, dtype=float))
     if B.shape[0] == 0:
         return T
     S = scaling_matrix(length)
-    P = np.linalg.inv(S) @ (B.T @ B) @ S  # projects plain twists onto the subspace
+    Sinv = np.linalg.inv(S)
+    W = np.eye(6) if weight is None else 0.5 * (np.asarray(weight, float) + np.asarray(weight, float).T)
+    normal = B @ W @ B.T
+    if not np.all(np.isfinite(normal)) or np.linalg.cond(normal) > 1e12:
+        W, normal = np.eye(6), np.eye(B.shape[0])  # the weight does not see the subspace
     for _ in range(max(1, iterations)):
-        T = orthonormalize(T @ exp(P @ log(np.linalg.inv(T) @ T_ref)))
+        d = S @ log(np.linalg.inv(T) @ T_ref)
+        c = np.linalg.solve(normal, B @ W @ d)
+        T = orthonormalize(T @ exp(Sinv @ B.T @ c))
     return T
 
 
@@ -234,6 +279,7 @@ def degenerate_anchor(
     sigma: float,
     reference_covariance: np.ndarray | None = None,
     iterations: int = 3,
+    reference_information: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A registration pose whose degenerate components are taken from a reference pose.
 
@@ -259,6 +305,12 @@ def degenerate_anchor(
             reported covariance along the subspace keeps growing like the wheel random walk.
         iterations: Gauss-Newton steps making the degenerate components of
             ``log(T_target^-1 T_ref)`` vanish (one is exact for small differences).
+        reference_information: 6x6 ``(v, w)`` base_link information of the reference's own
+            increment (the wheel increment). The position along the subspace is then the
+            reference's weighted least-squares fit (:func:`remap_pose`), so a rotation the
+            reference does not measure (roll, pitch from wheels) cannot move it: a detected
+            tunnel axis carries a few hundredths of roll, and 1 degree of roll disagreement
+            outweighed 9 cm along the axis without the weight.
 
     Returns:
         ``(T_target, omega)``: ``T_meas`` moved along the degenerate subspace onto ``T_ref``'s
@@ -267,9 +319,11 @@ def degenerate_anchor(
     """
     Minv = np.linalg.inv(scaled_lidar_to_base(T_base_lidar, length))
     deg = orthonormal_rows(basis_scaled)
+    M = scaled_lidar_to_base(T_base_lidar, length)
+    weight = None if reference_information is None else M.T @ reference_information @ M
     T_target = remap_pose(np.asarray(T_meas, dtype=float) @ T_base_lidar,
                           np.asarray(T_ref, dtype=float) @ T_base_lidar, deg, length,
-                          iterations) @ np.linalg.inv(T_base_lidar)
+                          iterations, weight=weight) @ np.linalg.inv(T_base_lidar)
     cov_deg = np.eye(len(deg)) * sigma**2
     if reference_covariance is not None:
         cov_deg = cov_deg + covariance_along(reference_covariance, deg, length, T_base_lidar)
