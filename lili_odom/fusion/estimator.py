@@ -17,20 +17,21 @@ Factors between consecutive states ``i-1 -> i``:
   the form: ``"between"``, a ``BetweenFactorPose3`` with the relative measurement
   ``Z = T_fused(i-1)^-1 T_icp`` against the previous **fused** pose; or ``"prior"``
   (experimental), a ``PriorFactorPose3`` at ``T_icp`` whose degenerate components are taken
-  from the wheel prediction (solution remapping, weighted by the wheels' information) and held
-  with ``lidar.anchor_sigma``. The
-  relative form counts a correction twice when iSAM2 later moves ``X(i-1)`` (the new pose
-  is dragged along and the next registration corrects it back), so the estimate oscillates
-  across the tunnel scan to scan; the absolute form does not, but is sensitive to spurious
-  components of the detected basis (see :func:`lili_odom.fusion.subspace.degenerate_anchor`
-  and solution remapping, :mod:`lili_odom.pipeline.remap`). ``"hybrid"`` (default)
+  from the wheel prediction (solution remapping, weighted by the wheels' information) and
+  held with ``lidar.anchor_sigma``. The relative form counts a correction twice when iSAM2
+  later moves ``X(i-1)`` (the new pose is dragged along and the next registration corrects
+  it back), so the estimate oscillates across the tunnel scan to scan; the absolute form
+  does not, but is sensitive to spurious components of the detected basis (see
+  :func:`lili_odom.fusion.subspace.degenerate_anchor` and solution remapping,
+  :mod:`lili_odom.pipeline.remap`). ``"hybrid"`` (default)
   adds the prior restricted to translation and yaw and the between factor restricted to roll
   and pitch.
 * Wheel ``BetweenFactorPose3`` whose information lives only inside the degenerate subspace
   (the paper's solution remapping, as a factor): by default the wheels' own weighted fit of
-  the motion along it (``wheel_restriction``, :func:`lili_odom.fusion.subspace.weighted_restriction`),
-  so the roll and pitch they do not measure neither weaken nor move it. Without degeneracy
-  there is no wheel factor unless ``wheel_weak_scale`` > 0. The increment's distance is first divided by the wheel
+  the motion along it (``wheel_restriction``,
+  :func:`lili_odom.fusion.subspace.weighted_restriction`), so the roll and pitch they do not
+  measure neither weaken nor move it. Without degeneracy there is no wheel factor unless
+  ``wheel_weak_scale`` > 0. The increment's distance is first divided by the wheel
   scale estimated online from fully constrained registrations
   (:mod:`lili_odom.fusion.wheel_scale`), since inside the subspace a scale error is drift.
 

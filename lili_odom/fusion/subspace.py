@@ -190,7 +190,8 @@ def split_information(
             (0 = none: the wheels then only act inside it).
         mode: ``"marginalize"`` or ``"project"`` (see module docstring).
         wheel_mode: how the wheel information is restricted to the subspace: ``"same"`` as
-            the LiDAR's (``mode``), or ``"weighted"`` (:func:`weighted_restriction`).
+            the LiDAR's (``mode``), ``"marginalize"``, ``"project"``, or ``"weighted"``
+            (:func:`weighted_restriction`).
     """
     M = scaled_lidar_to_base(T_base_lidar, length)
     Minv = np.linalg.inv(M)
@@ -218,7 +219,8 @@ def split_information(
         elif wheel_mode == "weighted":
             part = weighted_restriction(om_w, deg)
         else:
-            part = restrict_information(om_w, deg, ok, mode if wheel_mode == "same" else wheel_mode)
+            part = restrict_information(om_w, deg, ok,
+                                        mode if wheel_mode == "same" else wheel_mode)
         if wheel_weak_scale > 0.0 and ok.shape[0] > 0:
             part = part + wheel_weak_scale * restrict_information(om_w, ok, deg, mode)
         if np.any(part != 0.0):
@@ -259,7 +261,8 @@ def remap_pose(T: np.ndarray, T_ref: np.ndarray, basis_scaled: np.ndarray, lengt
         return T
     S = scaling_matrix(length)
     Sinv = np.linalg.inv(S)
-    W = np.eye(6) if weight is None else 0.5 * (np.asarray(weight, float) + np.asarray(weight, float).T)
+    W = np.eye(6) if weight is None else np.asarray(weight, dtype=float)
+    W = 0.5 * (W + W.T)
     normal = B @ W @ B.T
     if not np.all(np.isfinite(normal)) or np.linalg.cond(normal) > 1e12:
         W, normal = np.eye(6), np.eye(B.shape[0])  # the weight does not see the subspace
@@ -317,9 +320,9 @@ def degenerate_anchor(
         degenerate components, and the 6x6 ``(v, w)`` base_link information (body frame at
         ``T_target``) supported on that subspace.
     """
-    Minv = np.linalg.inv(scaled_lidar_to_base(T_base_lidar, length))
-    deg = orthonormal_rows(basis_scaled)
     M = scaled_lidar_to_base(T_base_lidar, length)
+    Minv = np.linalg.inv(M)
+    deg = orthonormal_rows(basis_scaled)
     weight = None if reference_information is None else M.T @ reference_information @ M
     T_target = remap_pose(np.asarray(T_meas, dtype=float) @ T_base_lidar,
                           np.asarray(T_ref, dtype=float) @ T_base_lidar, deg, length,
