@@ -127,8 +127,8 @@ def weighted_restriction(omega: np.ndarray, keep: np.ndarray) -> np.ndarray:
     detected tunnel axis mixes a little roll or pitch into the translation; restricted with
     ``"project"``, the wheels' "no tilt change" (which they do not measure) would move the
     position along the axis; restricted with ``"marginalize"``, their weak tilt makes them
-    weak along the whole direction (8 cm instead of 8 mm per scan for 0.4 scaled pitch),
-    and the IMU then decides the distance. The information along span(keep) equals
+    weak along the whole direction (more than 7 times for 0.39 of scaled pitch,
+    ``test/test_fusion.py``), and the IMU then decides the distance. The information along span(keep) equals
     ``"project"``'s; it has rank ``len(keep)`` but is not supported on span(keep).
 
     Args:
@@ -312,8 +312,9 @@ def degenerate_anchor(
             increment (the wheel increment). The position along the subspace is then the
             reference's weighted least-squares fit (:func:`remap_pose`), so a rotation the
             reference does not measure (roll, pitch from wheels) cannot move it: a detected
-            tunnel axis carries a few hundredths of roll, and 1 degree of roll disagreement
-            outweighed 9 cm along the axis without the weight.
+            tunnel axis carries some roll, and without the weight 0.02 rad of roll
+            disagreement moves the target by more than 5 cm along the axis
+            (``test/test_fusion_prior_factor.py``).
 
     Returns:
         ``(T_target, omega)``: ``T_meas`` moved along the degenerate subspace onto ``T_ref``'s
