@@ -84,7 +84,9 @@ class NodeConfig:
             (0: off).
         marker_arrow_length: length of the ``~/degeneracy`` arrows [m].
         scan_queue_size: scans allowed to wait while one is processed; when full, the oldest
-            waiting scan is dropped (counted, logged).
+            waiting scan is dropped (counted, logged). Each waiting scan holds its cloud
+            message (about 6 MB for a full OS1-128 scan); a replay that must lose nothing
+            however slow the machine queues the whole bag (up to 1000).
         scan_subscription_depth: history depth of the cloud subscription (sensor-data QoS),
             so clouds arriving while the executor is busy reach the node's queue.
         reliable_inputs: subscribe to the inputs RELIABLE instead of best effort (sensor-data
@@ -121,7 +123,7 @@ class NodeConfig:
         check_range("diagnostics_period", self.diagnostics_period, 0.0, 3600.0, unit="s")
         check_range("marker_arrow_length", self.marker_arrow_length, 0.0, 1000.0, lo_open=True,
                     unit="m")
-        check_range("scan_queue_size", self.scan_queue_size, 1, 100)
+        check_range("scan_queue_size", self.scan_queue_size, 1, 1000)
         check_range("scan_subscription_depth", self.scan_subscription_depth, 1, 1000)
         self.extrinsics.validate()
         _check_ranges(self)

@@ -72,3 +72,21 @@ def test_apply_overrides_reads_yaml_scalars_below_the_prefix() -> None:
         apply_overrides(NodeConfig(), {"lili.bogus": "1"})
     with pytest.raises(ValueError, match="return_ratio"):
         apply_overrides(NodeConfig(), {"lili.return_ratio": "2.0"})
+
+
+SHIPPED = sorted(p for p in YAML.parent.glob("*.yaml") if p != YAML)
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=[p.stem for p in SHIPPED])
+def test_shipped_parameter_files_load_validate_and_change_something(path):
+    cfg = load_config(path)
+    cfg.validate()
+    assert flatten(cfg) != flatten(load_config(None)), f"{path.name} overrides nothing"
+
+
+def test_deterministic_config_puts_every_native_thread_count_at_one():
+    defaults = flatten(load_config(None))
+    threads = [k for k in defaults if k.endswith("max_threads")]
+    assert len(threads) >= 4  # the scan matcher and each detector's registration
+    cfg = flatten(load_config(YAML.parent / "deterministic.yaml"))
+    assert {k: cfg[k] for k in threads} == {k: 1 for k in threads}

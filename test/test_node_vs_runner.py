@@ -48,8 +48,10 @@ def test_node_over_dds_matches_offline_runner(tmp_path, monkeypatch):
     node = LiliOdomNode(context=ctx, provider=OdometryPipelineProvider(),
                         parameter_overrides=parameters_from_mapping(
                             {"pipeline.method": METHOD, "diagnostics_period": 0.0,
-                                 # play is a reliable publisher: a lossless replay
-                                 "reliable_inputs": True}))
+                                 # play is a reliable publisher: a lossless replay, with a
+                                 # queue for the whole bag, so a loaded machine drops nothing
+                                 "reliable_inputs": True, "scan_queue_size": 1000,
+                                 "scan_subscription_depth": 1000}))
     listener = rclpy.create_node("listener", context=ctx)
     got: list = []
     listener.create_subscription(message_class("nav_msgs/msg/Odometry"), "/lili_odom/odometry",
@@ -62,10 +64,10 @@ def test_node_over_dds_matches_offline_runner(tmp_path, monkeypatch):
     spin.start()
     try:
         play = subprocess.run([sys.executable, "-m", "lili_odom.cli", "play", str(BAG),
-                               "--rate", "1.0", "--delay", "20.0"],
+                               "--rate", "1.0", "--delay", "20.0", "--qos-depth", "1000"],
                               env=env, capture_output=True, text=True, timeout=120)
         assert play.returncode == 0, play.stderr
-        wait_for(lambda: len(got) >= len(expected), 30.0)
+        wait_for(lambda: len(got) >= len(expected), 120.0)
         time.sleep(0.5)
         diag = node.diagnostics()
     finally:
