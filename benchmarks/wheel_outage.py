@@ -14,8 +14,8 @@ messages dropped by :class:`lili_odom.evaluation.faults.FaultInjector`) on piece
 ``--trial`` starting at each of ``--starts`` [s], for each simulator seed, configuration and
 repeat, with ``lili``. Pieces are simulated once into the simulator cache (``data/sim``).
 
-Repeats of the same run are not identical by default: KISS-ICP's parallel reductions (TBB) sum
-in a thread-dependent order, and the outage amplifies those last-bit differences.
+Repeats of the same run need not be identical by default: KISS-ICP's parallel reductions
+(TBB) sum in a thread-dependent order, and the outage amplifies those last-bit differences.
 ``--threads 1`` runs the native code on one thread, which makes repeats bit-identical (and the
 runs slower).
 
@@ -187,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
              "over the piece; final: position error at the piece's (and the outage's) end. "
              "Native threads per run: " + ("all" if not args.threads else str(args.threads))
              + (" (repeats are bit-identical)." if args.threads == 1 else
-                " (repeats differ: parallel reductions in KISS-ICP sum in a thread-dependent "
+                " (repeats can differ: parallel reductions in KISS-ICP sum in a thread-dependent "
                 "order, and the outage amplifies the last-bit differences)."), "",
              "## Over all runs [m]", "", *_summary(rows, args.configs), "",
              "## Per window: ATE / final [m], one pair per repeat", "",
