@@ -61,7 +61,10 @@ def fault_cases(duration: float) -> dict[str, dict]:
 
 # --------------------------------------------------------------------------- one fault run
 def worker_fault_run(job: dict) -> dict:
-    """Run one (case, method) in this process; returns the JSON-able result."""
+    """Run one (case, method) in this process; returns the JSON-able result.
+
+    Optional job keys: ``config`` (a parameter file relative to the repository, default the
+    built-in defaults) and ``threads`` (native threads, 0 = the configuration's)."""
     import logging
 
     from lili_odom.bagio.reader import BagReader
@@ -69,8 +72,14 @@ def worker_fault_run(job: dict) -> dict:
     from lili_odom.evaluation.faults import FaultInjector, FaultSpec, read_bag, run_stream
 
     logging.basicConfig(level=logging.ERROR)
-    cfg = load_config(None)
+    config = job.get("config", "default")
+    cfg = load_config(None if config == "default" else ROOT / config)
     cfg.pipeline.method = job["method"]
+    if job.get("threads"):
+        cfg.pipeline.scan_matcher.max_threads = job["threads"]
+        detector = getattr(cfg.pipeline, job["method"], None)  # "none" has no registration
+        if detector is not None:
+            detector.registration.max_threads = job["threads"]
     cfg.validate()
     topics = [cfg.lidar_topic, cfg.imu_topic, cfg.wheel_topic, cfg.ground_truth_topic,
               "/tf_static"]

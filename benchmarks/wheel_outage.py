@@ -37,6 +37,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from faults import worker_fault_run  # noqa: E402
 from lili_odom.sim.generator import ensure_trial_bag  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
@@ -47,30 +49,16 @@ def _label(config: str) -> str:
 
 
 def _run(job: dict) -> dict:
-    """One outage run in this worker process; returns its JSON-able row."""
-    import logging
-
-    from lili_odom.bagio.reader import BagReader
-    from lili_odom.config import load_config
-    from lili_odom.evaluation.faults import FaultInjector, FaultSpec, read_bag, run_stream
-
-    logging.basicConfig(level=logging.ERROR)
-    cfg = load_config(None if job["config"] == "default" else ROOT / job["config"])
-    cfg.pipeline.method = "lili"
-    if job["threads"]:
-        cfg.pipeline.scan_matcher.max_threads = job["threads"]
-        cfg.pipeline.lili.registration.max_threads = job["threads"]
-    cfg.validate()
-    topics = [cfg.lidar_topic, cfg.imu_topic, cfg.wheel_topic, cfg.ground_truth_topic,
-              "/tf_static"]
-    injector = FaultInjector(FaultSpec(wheel_outage=tuple(job["outage"])))
-    with BagReader(ROOT / job["bag"], topics=topics) as reader:
-        run = run_stream(injector(read_bag(reader)), cfg)
-    m = run.metrics(segment_m=10.0)
+    """One outage run in this worker process (``faults.worker_fault_run``); its row."""
+    result = worker_fault_run({
+        "case": "wheel_outage", "method": "lili", "seed": 0, "window": None,
+        "faults": {"wheel_outage": job["outage"]}, "bag": str(ROOT / job["bag"]),
+        "config": job["config"], "threads": job["threads"]})
+    m = result["metrics"]
     row = {k: job[k] for k in ("seed", "start", "repeat")}
-    row.update(config=_label(job["config"]), ate_m=m.ate_rmse_m, max_m=m.ate_max_m,
-               final_m=m.final_error_m, scans=len(run.estimates),
-               wheel_dropped=injector.stats.dropped.get(cfg.wheel_topic, 0))
+    row.update(config=_label(job["config"]), ate_m=m["ate_rmse_m"], max_m=m["ate_max_m"],
+               final_m=m["final_error_m"], scans=result["accounting"]["outputs"],
+               wheel_dropped=result["injector"]["dropped"].get("/platform/odom", 0))
     print(json.dumps(row), flush=True)
     return row
 
@@ -174,8 +162,9 @@ def main(argv: list[str] | None = None) -> int:
         {"trial": args.trial, "resolution": args.resolution, "duration_s": args.duration,
          "outage_s": args.outage, "threads": args.threads, "runs": rows}, indent=1) + "\n")
     _plot(rows, args.configs, args.out / "wheel_outage.png")
+    starts = " ".join(f"{t:g}" for t in args.starts)
     command = (f"python benchmarks/wheel_outage.py --trial {args.trial} --seeds "
-               f"{' '.join(map(str, args.seeds))} --starts {' '.join(f'{t:g}' for t in args.starts)}"
+               f"{' '.join(map(str, args.seeds))} --starts {starts}"
                f" --duration {args.duration:g} --outage {args.outage:g} --configs "
                f"{' '.join(args.configs)} --repeats {args.repeats} --threads {args.threads} "
                f"--resolution {args.resolution}")

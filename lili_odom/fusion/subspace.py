@@ -127,9 +127,10 @@ def weighted_restriction(omega: np.ndarray, keep: np.ndarray) -> np.ndarray:
     detected tunnel axis mixes a little roll or pitch into the translation; restricted with
     ``"project"``, the wheels' "no tilt change" (which they do not measure) would move the
     position along the axis; restricted with ``"marginalize"``, their weak tilt makes them
-    weak along the whole direction (more than 7 times for 0.39 of scaled pitch,
-    ``test/test_fusion.py``), and the IMU then decides the distance. The information along span(keep) equals
-    ``"project"``'s; it has rank ``len(keep)`` but is not supported on span(keep).
+    weak along the whole direction (information more than 50 times lower for 0.39 of scaled
+    pitch, ``test/test_fusion.py``), and the IMU then decides the distance. The information
+    along span(keep) equals ``"project"``'s; it has rank ``len(keep)`` but is not supported
+    on span(keep).
 
     Args:
         omega: 6x6 PSD information in coordinates where ``keep`` is orthonormal.
