@@ -3,6 +3,7 @@
     python benchmarks/arc_diagnostics.py probe --times 60 130 150 200 250 300
     python benchmarks/arc_diagnostics.py jumps data/tunnel_runs/trial1_64x512_seed0/lili
     python benchmarks/arc_diagnostics.py errors data/tunnel_runs/trial1_64x512_seed0/lili
+    python benchmarks/arc_diagnostics.py tilt RUN_DIR --trial 2 --seed 2
 
 ``probe`` runs LiLi on simulated Trial 1 scans registered against a local map built from the
 *true* poses (the previous ``--history`` seconds of scans, each column placed with its true
@@ -20,7 +21,16 @@ them, an estimator that oscillates does.
 vertical, roll, pitch, yaw) in the true body frame, without alignment: slow drift and sudden
 failures look different there, and so do along-axis (wheel) and lateral/yaw (LiDAR) errors.
 
-All three append a section to ``benchmarks/results/arc_diagnostics.md`` (``--out`` to change).
+``tilt`` follows a run's roll/pitch against gravity: the world-frame tilt error of the fused
+pose and of the scan-to-map registration (the odometry frame is gravity-aligned at the start,
+so only the start yaw and position are aligned), with the accelerometer bias the estimator
+holds (``scans.csv``) and, for a simulated bag (``--trial``/``--seed``), the true one. At rest
+the accelerometer cannot tell a bias from a tilt, so the start's gravity alignment takes a
+bias ``b`` as a tilt of about ``b / g``; the local map is built in that frame. The
+registration-minus-fused column is the map's tilt against the fused estimate, averaged over
+the row's period (single registrations scatter by tenths of a degree).
+
+All four append a section to ``benchmarks/results/arc_diagnostics.md`` (``--out`` to change).
 """
 from __future__ import annotations
 
@@ -145,6 +155,94 @@ def jumps(run_dir: Path, threshold: float) -> list[str]:
     return lines + [""]
 
 
+def _true_accel_bias(trial: int, seed: int, stamps: np.ndarray) -> np.ndarray:
+    """(n, 3) accelerometer bias [m/s^2] the simulator gave the IMU of ``trial``/``seed`` at
+    bag ``stamps`` [s] (its IMU does not depend on the LiDAR resolution)."""
+    from lili_odom.sim.generator import EPOCH_NS, SimRequest, Simulation
+    from lili_odom.sim.imu import simulate_imu
+
+    sim = Simulation(SimRequest(trial=trial, seed=seed, resolution=(16, 64)))
+    imu = simulate_imu(sim.trajectory, sim.sensors.extrinsics.base_to_imu, sim.sensors.imu, seed)
+    i = np.searchsorted(imu.t, stamps - EPOCH_NS * 1e-9).clip(0, len(imu.t) - 1)
+    return imu.accel_bias[i]
+
+
+def tilt_series(run_dir: Path, trial: int | None = None, seed: int | None = None) -> dict:
+    """Per scan of a run directory: ``t`` [s from the first scan], ``heading`` (true yaw
+    turned since the start [deg]), world-frame rotation errors ``fused`` and ``registration``
+    ((n, 3) [deg], axes of the start heading), the estimated accelerometer bias ``bias``
+    ((n, 3) [m/s^2], IMU frame) and, with ``trial``/``seed``, the simulator's ``true_bias``."""
+    from scipy.spatial.transform import Rotation
+
+    from lili_odom.bagio.tum import read_tum
+
+    t_est, T_est = read_tum(run_dir / "estimate.tum")
+    t_true, T_true = read_tum(run_dir / "truth.tum")
+    scans = np.genfromtxt(run_dir / "scans.csv", delimiter=",", names=True)
+    if "icp_qw" not in (scans.dtype.names or ()):
+        raise ValueError(f"{run_dir}/scans.csv has no registration orientation (older run)")
+    j = np.searchsorted(t_true, t_est).clip(1, len(t_true) - 1)
+    j -= np.abs(t_true[j - 1] - t_est) < np.abs(t_true[j] - t_est)
+    keep = np.abs(t_true[j] - t_est) < 0.02
+    R_true = T_true[j[keep], :3, :3]
+    R_est = T_est[keep, :3, :3]
+    stamps = t_est[keep]
+    k = np.searchsorted(scans["stamp"], stamps).clip(0, len(scans) - 1)
+    row = scans[k]
+    q = np.stack([row[f"icp_q{a}"] for a in "xyzw"], axis=1)
+    ok = np.isfinite(q).all(axis=1)
+    R_icp = np.repeat(np.eye(3)[None], len(q), axis=0)
+    R_icp[ok] = Rotation.from_quat(q[ok]).as_matrix()
+    yaw = lambda R: Rotation.from_matrix(R).as_euler("ZYX")[..., 0]  # noqa: E731
+    yaw0 = yaw(R_true[0])
+    align = Rotation.from_euler("z", yaw0 - yaw(R_est[0])).as_matrix()
+    heading = Rotation.from_euler("z", -yaw0).as_matrix()
+
+    def world_error(R: np.ndarray) -> np.ndarray:  # degrees, axes of the start heading
+        E = np.einsum("ij,njk,nlk->nil", align, R, R_true)
+        return np.degrees(Rotation.from_matrix(E).as_rotvec() @ heading.T)
+
+    return {
+        "t": stamps - stamps[0],
+        "heading": np.degrees(np.unwrap(yaw(R_true)) - yaw0),
+        "fused": world_error(R_est),
+        "registration": np.where(ok[:, None], world_error(R_icp), np.nan),
+        "bias": np.stack([row[f"accel_bias_{a}"] for a in "xyz"], axis=1),
+        "true_bias": (_true_accel_bias(trial, seed, stamps)
+                      if trial is not None and seed is not None else None),
+    }
+
+
+def tilt(run_dir: Path, period: float, trial: int | None, seed: int | None) -> list[str]:
+    """World-frame tilt error of the fused pose and of the registration, with the estimated
+    (and, for a simulated bag, true) accelerometer bias, one row every ``period`` s."""
+    d = tilt_series(run_dir, trial, seed)
+    t, turned, e_fused, ba, true_ba = d["t"], d["heading"], d["fused"], d["bias"], d["true_bias"]
+    diff = d["registration"] - e_fused
+    lines = [f"## Tilt against gravity: {_run_name(run_dir)}", "",
+             "World-frame rotation error of the fused estimate and of the scan-to-map "
+             "registration (rotation vector of `R_est R_true^T` after aligning the start yaw, "
+             "in the axes of the start heading: x forward, y left) [deg]; registration - fused "
+             "averaged over the row's period; accelerometer bias estimate (IMU frame) "
+             f"[m/s^2]{' and the simulator' + chr(39) + 's true one' if true_ba is not None else ''}. "
+             "At rest an accelerometer bias b reads as a tilt of about b / g (0.1 m/s^2 = "
+             "0.58 deg).", "",
+             "| t [s] | heading [deg] | fused x | fused y | registration - fused x | y | bias x | "
+             "bias y" + (" | true bias x | true bias y |" if true_ba is not None else " |"),
+             "|---" * (8 + 2 * (true_ba is not None)) + "|"]
+    for tq in [*np.arange(0.0, t[-1], period), t[-1]]:
+        i = int(np.argmin(np.abs(t - tq)))
+        window = (t > tq - period) & (t <= tq)
+        d = np.nanmean(diff[window], axis=0) if np.isfinite(diff[window]).any() else (np.nan,) * 3
+        cells = [f"{t[i]:.0f}", f"{turned[i]:+.0f}", *(f"{v:+.2f}" for v in e_fused[i, :2]),
+                 *(f"{v:+.2f}" for v in d[:2]), *(f"{v:+.3f}" for v in ba[i, :2])]
+        if true_ba is not None:
+            cells += [f"{v:+.3f}" for v in true_ba[i, :2]]
+        lines.append("| " + " | ".join(cells) + " |")
+    print("\n".join(lines))
+    return lines + [""]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -158,7 +256,12 @@ def main(argv: list[str] | None = None) -> int:
     e = sub.add_parser("errors", help="error by component of a run directory")
     e.add_argument("run_dir", type=Path)
     e.add_argument("--period", type=float, default=20.0, help="table row every N s")
-    for q in (p, j, e):
+    g = sub.add_parser("tilt", help="roll/pitch against gravity, with the accelerometer bias")
+    g.add_argument("run_dir", type=Path)
+    g.add_argument("--period", type=float, default=20.0, help="table row every N s")
+    g.add_argument("--trial", type=int, help="simulated trial of the bag (true bias)")
+    g.add_argument("--seed", type=int, help="simulator seed of the bag (true bias)")
+    for q in (p, j, e, g):
         q.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
     if args.command == "probe":
@@ -168,8 +271,16 @@ def main(argv: list[str] | None = None) -> int:
         if not (args.run_dir / "estimate.tum").exists() or not (args.run_dir / "truth.tum").exists():
             print(f"error: {args.run_dir}: needs estimate.tum and truth.tum", file=sys.stderr)
             return 2
-        lines = (jumps(args.run_dir, args.threshold) if args.command == "jumps"
-                 else errors(args.run_dir, args.period))
+        if args.command == "jumps":
+            lines = jumps(args.run_dir, args.threshold)
+        elif args.command == "errors":
+            lines = errors(args.run_dir, args.period)
+        else:
+            try:
+                lines = tilt(args.run_dir, args.period, args.trial, args.seed)
+            except ValueError as exc:
+                print(f"error: {exc}", file=sys.stderr)
+                return 2
     args.out.parent.mkdir(parents=True, exist_ok=True)
     header = "" if args.out.exists() else (
         "# Tunnel diagnostics\n\nProduced by `benchmarks/arc_diagnostics.py` "

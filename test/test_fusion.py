@@ -510,3 +510,53 @@ def test_accelerometer_bias_recovered_while_driving_a_degenerate_axis(factor: st
     assert np.allclose(out.accel_bias[:2], bias[:2], atol=0.01), out.accel_bias
     assert abs(out.velocity[1]) < 0.01 and abs(out.velocity[0] - 1.0) < 0.01, out.velocity
     assert abs(out.pose[0, 3] - 20.0) < 0.05 and abs(out.pose[1, 3]) < 0.01
+
+
+def _turn_under_a_tilted_map(gain: float, delta: float = 0.01, n: int = 300) -> tuple:
+    """Level robot turning in place at 0.3 rad/s, IMU exact; the registrations come from a map
+    whose frame is tilted by ``delta`` [rad] about x (what an accelerometer bias taken for
+    gravity at the start leaves). Returns (last output, mean |registration - fused| tilt of
+    the last 50 updates [rad])."""
+    wz = 0.3
+    cfg = config(gravity_align=False, gravity_tracking_gain=gain)
+    est = FusionEstimator(cfg)
+    tilt = exp(np.array([0, 0, 0, delta, 0, 0]))
+    feed_imu(est, -1.0, 0.0, (0.0, 0.0, G), (0.0, 0.0, wz))
+    est.initialize(0.0, pose=tilt, velocity=np.zeros(3))
+    diffs, out = [], None
+    for k in range(1, n + 1):
+        t = 0.1 * k
+        feed_imu(est, t - 0.09, t, (0.0, 0.0, G), (0.0, 0.0, wz))
+        meas = tilt @ pose(rot_z(wz * t))
+        out = est.update(t, meas)
+        assert out is not None
+        diffs.append(np.linalg.norm(log(meas @ np.linalg.inv(out.pose))[3:5]))
+    return out, float(np.mean(diffs[-50:]))
+
+
+def test_gravity_tracking_follows_the_map_frame_through_a_turn() -> None:
+    """Without tracking the IMU pulls the estimate off the map's tilt once the turn separates
+    bias from tilt; with it, gravity is rotated into the map's frame and the two agree."""
+    out0, diff0 = _turn_under_a_tilted_map(0.0)
+    out1, diff1 = _turn_under_a_tilted_map(0.02)
+    np.testing.assert_allclose(out0.gravity_tilt, 0.0)
+    assert diff0 > 0.002, diff0
+    assert diff1 < 0.5 * diff0, (diff1, diff0)
+    np.testing.assert_allclose(out1.gravity_tilt, [0.01, 0.0], atol=0.003)
+
+
+def test_gravity_tracking_is_bounded_and_gated() -> None:
+    cfg = config(gravity_align=False, gravity_tracking_gain=1.0, gravity_tracking_max=0.004)
+    est = FusionEstimator(cfg)
+    feed_imu(est, -1.0, 0.0, (0.0, 0.0, G))
+    est.initialize(0.0, pose=np.eye(4), velocity=np.zeros(3))
+    for k in range(1, 20):
+        feed_imu(est, 0.1 * k - 0.09, 0.1 * k, (0.0, 0.0, G))
+        out = est.update(0.1 * k, exp(np.array([0, 0, 0, 0.03, 0, 0])))
+    assert 0.0 < np.linalg.norm(out.gravity_tilt) <= 0.004 + 1e-12
+    assert out.gravity_tilt[0] > 0.0
+    before = out.gravity_tilt.copy()
+    feed_imu(est, 1.91, 2.0, (0.0, 0.0, G))
+    out = est.update(2.0, exp(np.array([0, 0, 0, -0.2, 0, 0])))  # beyond the 0.05 rad gate
+    np.testing.assert_allclose(out.gravity_tilt, before)
+    assert est.initialize(2.1).gravity_tilt.tolist() == [0.0, 0.0]  # a new frame: along -z

@@ -7,8 +7,12 @@ writes into ``out_dir``:
 * ``odometry/``: rosbag2 mcap with ``/lili_odom/odometry``, ``path``, degeneracy markers and JSON
   basis, ``/tf`` and the final local map;
 * ``estimate.tum`` and, when the bag has ground truth, ``truth.tum`` (TUM: stamp x y z qx qy qz qw);
-* ``scans.csv``: one row per processed scan: stamp [s], detected dimension, position [m] and
-  per-stage times [s];
+* ``scans.csv``: one row per processed scan: stamp [s], detected dimension, position [m],
+  per-stage times [s], the online wheel scale, the orientation of the scan-to-map registration
+  (base_link in the odometry frame, quaternion ``icp_qx .. icp_qw``; the fused one is in
+  ``estimate.tum``), the estimated IMU biases (``accel_bias_*`` [m/s^2], ``gyro_bias_*``
+  [rad/s], IMU frame) and the tracked gravity's rotation about the odometry frame's x and y
+  (``gravity_tilt_x/y`` [rad], ``fusion.gravity_tracking_gain``);
 * ``metrics.json``: ATE / RPE (via ``evo``, when there is truth), degeneracy statistics,
   counters, mean per-stage timings, throughput;
 * ``trajectory.png``: top view of the estimate (degenerate scans marked) and the truth.
@@ -65,6 +69,22 @@ class OfflineRun:
         return np.array([(T_align @ T)[:3, 3] for _, T in self.truth])
 
 
+def _quaternion(T: np.ndarray | None) -> list[float]:
+    """(qx, qy, qz, qw) of a 4x4 pose's rotation; NaN when it is missing or not finite."""
+    from scipy.spatial.transform import Rotation
+
+    if T is None or np.shape(T) != (4, 4) or not np.isfinite(T).all():
+        return [float("nan")] * 4
+    return [float(q) for q in Rotation.from_matrix(np.asarray(T, dtype=float)[:3, :3]).as_quat()]
+
+
+def _vector(v: np.ndarray | None, n: int = 3) -> list[float]:
+    """An n-vector as n floats (NaN when missing)."""
+    if v is None or np.shape(v) != (n,):
+        return [float("nan")] * n
+    return [float(x) for x in v]
+
+
 def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: int = 0,
             rpe_segment: float = 100.0, progress: bool = True,
             progress_label: str = "odometry") -> OfflineRun:
@@ -113,7 +133,11 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
                 run.timings.setdefault(k, []).append(v)
             rows.append([out.stamp, dim, *out.pose[:3, 3],
                          *(out.timings.get(k, float("nan")) for k in STAGES),
-                         out.details.get("wheel_scale", float("nan"))])
+                         out.details.get("wheel_scale", float("nan")),
+                         *_quaternion(out.icp_pose),
+                         *_vector(out.details.get("accel_bias")),
+                         *_vector(out.details.get("gyro_bias")),
+                         *_vector(out.details.get("gravity_tilt"), 2)])
             writer.write_output(out)
 
         for item in reader:
@@ -148,7 +172,9 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
     with open(out_dir / "scans.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["stamp", "dimension", "x", "y", "z", *(f"{k}_s" for k in STAGES),
-                    "wheel_scale"])
+                    "wheel_scale", "icp_qx", "icp_qy", "icp_qz", "icp_qw",
+                    *(f"accel_bias_{a}" for a in "xyz"), *(f"gyro_bias_{a}" for a in "xyz"),
+                    "gravity_tilt_x", "gravity_tilt_y"])
         w.writerows(rows)
     dims = np.asarray(run.dimensions)
     summary: dict = {

@@ -160,6 +160,22 @@ class FusionConfig:
             preceding the first stamp (only when no initial pose is given).
         gravity_window_s: length of that IMU window [s].
         estimate_gyro_bias_at_rest: start the gyro bias at the mean rate when at rest.
+        gravity_tracking_gain: the direction of gravity in the odometry frame is tracked
+            (0 = always the frame's -z). At rest the accelerometer cannot tell its bias from a
+            tilt, so the start's gravity alignment takes a bias ``b`` as a tilt of about
+            ``b / g`` and the local map is built in that frame; once a turn makes the bias
+            observable, the IMU pulls the estimate towards true gravity, away from the map
+            (``benchmarks/arc_diagnostics.py tilt``). With a gain, each LiDAR update moves
+            the gravity used by the IMU preintegration by this fraction of the averaged tilt
+            between the registration and the fused pose beyond the deadband, so the IMU's
+            gravity follows the map's frame (an integral controller; per update, 0..1).
+        gravity_tracking_window_s: time constant of that average [s].
+        gravity_tracking_deadband: averaged tilt differences up to this [rad] are not
+            integrated: a map built from the estimate lags it by a little whenever the tilt
+            moves, and integrating that lag would walk gravity and map away together.
+        gravity_tracking_max: bound of that rotation of gravity [rad].
+        gravity_tracking_gate: registrations whose tilt differs from the fused pose's by more
+            than this [rad] are not used for it (outliers).
         wheel_scale: online calibration of the wheel distance scale
             (:mod:`lili_odom.fusion.wheel_scale`).
         wheel_weak_scale: factor on the wheel information outside the degenerate subspace
@@ -207,6 +223,11 @@ class FusionConfig:
     gravity_align: bool = True
     gravity_window_s: float = 1.0
     estimate_gyro_bias_at_rest: bool = True
+    gravity_tracking_gain: float = 0.0
+    gravity_tracking_window_s: float = 5.0
+    gravity_tracking_deadband: float = 0.0026
+    gravity_tracking_max: float = 0.035
+    gravity_tracking_gate: float = 0.05
     wheel_weak_scale: float = 0.0
     wheel_restriction: str = "weighted"
     no_imu_sigma_translation_per_s: float = 1.0
@@ -240,6 +261,15 @@ class FusionConfig:
                 check_range(prefix + name, getattr(self, name), 0.0, 1e3, lo_open=True)
         check_range(prefix + "gravity_window_s", self.gravity_window_s, 0.0, 60.0, lo_open=True,
                     unit="s")
+        check_range(prefix + "gravity_tracking_gain", self.gravity_tracking_gain, 0.0, 1.0)
+        check_range(prefix + "gravity_tracking_window_s", self.gravity_tracking_window_s, 0.0,
+                    3600.0, lo_open=True, unit="s")
+        check_range(prefix + "gravity_tracking_deadband", self.gravity_tracking_deadband, 0.0,
+                    0.5, unit="rad")
+        check_range(prefix + "gravity_tracking_max", self.gravity_tracking_max, 0.0, 0.5,
+                    unit="rad")
+        check_range(prefix + "gravity_tracking_gate", self.gravity_tracking_gate, 0.0, 0.5,
+                    lo_open=True, unit="rad")
         check_range(prefix + "wheel_weak_scale", self.wheel_weak_scale, 0.0, 1.0)
         if self.wheel_restriction not in WHEEL_RESTRICTIONS:
             raise ValueError(f"{prefix}wheel_restriction must be one of "

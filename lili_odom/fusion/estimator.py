@@ -2,7 +2,10 @@
 
 States (one per LiDAR scan, at the scan's ``header.stamp``):
 
-* ``X(i)``: ``gtsam.Pose3`` of ``base_link`` in the odometry frame (gravity-aligned, z up).
+* ``X(i)``: ``gtsam.Pose3`` of ``base_link`` in the odometry frame (gravity-aligned at the
+  start, z up; with ``gravity_tracking_gain`` the IMU factors' gravity may later tilt by up to
+  ``gravity_tracking_max`` in it, to keep the frame of the local map, see
+  :meth:`FusionEstimator._track_gravity`).
 * ``V(i)``: velocity of ``base_link`` in the odometry frame [m/s].
 * ``B(i)``: ``imuBias.ConstantBias`` (accelerometer [m/s^2], gyro [rad/s]) in the IMU frame.
 
@@ -174,6 +177,9 @@ class FusionOutput:
         degenerate_dimension: dimension of the degenerate subspace used for this update.
         used_lidar / used_imu / used_wheel: which measurements entered the update.
         notes: human-readable remarks (fallbacks, rejected inputs).
+        gravity_tilt: (2,) rotation [rad] about the odometry frame's x and y axes of the
+            gravity the IMU factors use from this update on
+            (``FusionConfig.gravity_tracking_gain``; zero without tracking).
     """
 
     t: float
@@ -188,6 +194,7 @@ class FusionOutput:
     used_imu: bool = False
     used_wheel: bool = False
     notes: list[str] = field(default_factory=list)
+    gravity_tilt: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
 
 @dataclass
@@ -241,6 +248,8 @@ class FusionEstimator:
         self.wheels = WheelBuffer(cfg.wheel)
         self.wheel_scale = WheelScaleEstimator(cfg.wheel_scale)
         self.stats = FusionStats()
+        self._gravity_tilt = np.zeros(2)  # gravity_tracking_gain: rad about odom x, y
+        self._tilt_difference = np.zeros(2)  # averaged registration - fused tilt [rad]
         self._params = make_preintegration_params(cfg.imu, self.T_base_imu)
         self._isam: gtsam.ISAM2 | None = None
         self._state: _State | None = None
@@ -315,7 +324,8 @@ class FusionEstimator:
             stationary = align.stationary and wheel_v is None
             if stationary and cfg.estimate_gyro_bias_at_rest:
                 gyro_bias = align.gyro_bias
-        if pose is None:
+        if pose is None:  # a new odometry frame: gravity along its -z
+            self._set_gravity_tilt(np.zeros(2), reset_average=True)
             T0 = np.eye(4)
             if cfg.gravity_align and samples:
                 T0[:3, :3] = align.R_world_base
@@ -641,6 +651,9 @@ class FusionEstimator:
             return None
         self.stats.n_updates += 1
         self._consecutive_failures = 0
+        if out.used_lidar and T_meas is not None and cfg.gravity_tracking_gain > 0.0:
+            self._track_gravity(T_meas, out.pose, basis, dt)
+            out.gravity_tilt = self._gravity_tilt.copy()
         if walk_step is not None and out.used_lidar:
             self._anchor_walk += walk_step
             out.covariance = inflate_along(out.covariance, basis, self._anchor_walk, length,
@@ -673,6 +686,49 @@ class FusionEstimator:
             self._reset()
         return out
 
+    def _set_gravity_tilt(self, tilt: np.ndarray, reset_average: bool = False) -> None:
+        self._gravity_tilt = np.asarray(tilt, dtype=float).copy()
+        if reset_average:
+            self._tilt_difference = np.zeros(2)
+        self._params = make_preintegration_params(self.config.imu, self.T_base_imu,
+                                                  self._gravity_tilt)
+
+    def _track_gravity(self, T_meas: np.ndarray, T_fused: np.ndarray, basis: np.ndarray,
+                       dt: float) -> None:
+        """One integral step of the gravity direction towards the registration's tilt.
+
+        The registration ``T_meas`` (base_link in the odometry frame, against the local map)
+        carries the map's tilt, ``T_fused`` the IMU's. Their world-frame rotation difference
+        about x and y is averaged (exponentially, ``gravity_tracking_window_s``); where the
+        average exceeds ``gravity_tracking_deadband``, the excess times
+        ``gravity_tracking_gain`` rotates the gravity of the following IMU factors, so a
+        persistent disagreement (the map built in a frame tilted by an accelerometer bias
+        taken for gravity at the start) is absorbed by gravity instead of the pose, while the
+        small lag of a map that follows the estimate is not integrated. Skipped when the
+        detected subspace contains a tilt (the registration's tilt is then not measured) or
+        the difference exceeds ``gravity_tracking_gate``.
+        """
+        cfg = self.config
+        if len(basis):
+            R_bl = self.T_base_lidar[:3, :3]
+            tilt_part = np.linalg.norm((basis[:, 3:] @ R_bl.T)[:, :2], axis=1)
+            if np.any(tilt_part > 0.3 * np.linalg.norm(basis, axis=1)):
+                return
+        d = np.asarray(gtsam.Rot3.Logmap(gtsam.Rot3(T_meas[:3, :3] @ T_fused[:3, :3].T)))[:2]
+        if not _finite(d) or np.linalg.norm(d) > cfg.gravity_tracking_gate:
+            return
+        alpha = min(1.0, max(0.0, dt) / cfg.gravity_tracking_window_s)
+        self._tilt_difference += alpha * (d - self._tilt_difference)
+        m = float(np.linalg.norm(self._tilt_difference))
+        if m <= cfg.gravity_tracking_deadband:
+            return
+        excess = self._tilt_difference * (1.0 - cfg.gravity_tracking_deadband / m)
+        tilt = self._gravity_tilt + cfg.gravity_tracking_gain * excess
+        n = float(np.linalg.norm(tilt))
+        if n > cfg.gravity_tracking_max:
+            tilt *= cfg.gravity_tracking_max / n
+        self._set_gravity_tilt(tilt)
+
     def _plausible(self, delta: np.ndarray, dt: float) -> bool:
         """True when the increment (4x4) is physically possible within ``dt`` seconds."""
         cfg = self.config
@@ -704,6 +760,7 @@ class FusionEstimator:
             gyro_bias=np.asarray(bias.gyroscope(), dtype=float),
             covariance=_from_gtsam_matrix(cov_g), degenerate_dimension=dim,
             used_lidar=used_lidar, used_imu=used_imu, used_wheel=used_wheel, notes=notes,
+            gravity_tilt=self._gravity_tilt.copy(),
         )
         self.last_output = out
         return out

@@ -100,7 +100,8 @@ class ImuNoiseConfig:
 
 
 def make_preintegration_params(
-    cfg: ImuNoiseConfig, T_base_imu: np.ndarray | None = None
+    cfg: ImuNoiseConfig, T_base_imu: np.ndarray | None = None,
+    gravity_tilt: np.ndarray | None = None,
 ) -> gtsam.PreintegrationCombinedParams:
     """GTSAM combined-preintegration parameters (gravity along -z of the world frame).
 
@@ -108,8 +109,13 @@ def make_preintegration_params(
         cfg: noise densities.
         T_base_imu: 4x4 pose of the IMU frame in ``base_link`` (None = identity); set as
             ``body_P_sensor``.
+        gravity_tilt: (2,) rotation vector (about the world x and y axes) [rad] applied to
+            gravity: the world frame's gravity is ``exp(tilt) (0, 0, -g)`` (None = along -z).
     """
     p = gtsam.PreintegrationCombinedParams.MakeSharedU(cfg.gravity)
+    if gravity_tilt is not None and np.any(gravity_tilt):
+        R = gtsam.Rot3.Expmap(np.array([gravity_tilt[0], gravity_tilt[1], 0.0])).matrix()
+        p.n_gravity = np.asarray(R, dtype=float) @ np.array([0.0, 0.0, -cfg.gravity])
     i3 = np.eye(3)
     p.setAccelerometerCovariance(cfg.accel_noise_density**2 * i3)
     p.setGyroscopeCovariance(cfg.gyro_noise_density**2 * i3)

@@ -385,7 +385,10 @@ class OdometryPipeline:
             details={"points": len(points), "source_points": len(source),
                      "threshold": self._matcher.threshold, "used_wheel": fused.used_wheel,
                      "used_imu": fused.used_imu,
-                     "wheel_scale": est.wheel_scale.scale},
+                     "wheel_scale": est.wheel_scale.scale,
+                     "accel_bias": np.asarray(fused.accel_bias, dtype=float),
+                     "gyro_bias": np.asarray(fused.gyro_bias, dtype=float),
+                     "gravity_tilt": np.asarray(fused.gravity_tilt, dtype=float)},
         )
         self._last_stamp = t_ref
         self._last_output = out
