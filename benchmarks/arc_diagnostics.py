@@ -193,7 +193,9 @@ def tilt_series(run_dir: Path, trial: int | None = None, seed: int | None = None
     ok = np.isfinite(q).all(axis=1)
     R_icp = np.repeat(np.eye(3)[None], len(q), axis=0)
     R_icp[ok] = Rotation.from_quat(q[ok]).as_matrix()
-    yaw = lambda R: Rotation.from_matrix(R).as_euler("ZYX")[..., 0]  # noqa: E731
+    def yaw(R: np.ndarray) -> np.ndarray:
+        return Rotation.from_matrix(R).as_euler("ZYX")[..., 0]
+
     yaw0 = yaw(R_true[0])
     align = Rotation.from_euler("z", yaw0 - yaw(R_est[0])).as_matrix()
     heading = Rotation.from_euler("z", -yaw0).as_matrix()
@@ -219,12 +221,13 @@ def tilt(run_dir: Path, period: float, trial: int | None, seed: int | None) -> l
     d = tilt_series(run_dir, trial, seed)
     t, turned, e_fused, ba, true_ba = d["t"], d["heading"], d["fused"], d["bias"], d["true_bias"]
     diff = d["registration"] - e_fused
+    truth_note = " and the simulator's true one" if true_ba is not None else ""
     lines = [f"## Tilt against gravity: {_run_name(run_dir)}", "",
              "World-frame rotation error of the fused estimate and of the scan-to-map "
              "registration (rotation vector of `R_est R_true^T` after aligning the start yaw, "
              "in the axes of the start heading: x forward, y left) [deg]; registration - fused "
              "averaged over the row's period; accelerometer bias estimate (IMU frame) "
-             f"[m/s^2]{' and the simulator' + chr(39) + 's true one' if true_ba is not None else ''}. "
+             f"[m/s^2]{truth_note}. "
              "At rest an accelerometer bias b reads as a tilt of about b / g (0.1 m/s^2 = "
              "0.58 deg).", "",
              "| t [s] | heading [deg] | fused x | fused y | registration - fused x | y | bias x | "

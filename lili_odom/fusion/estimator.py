@@ -686,6 +686,20 @@ class FusionEstimator:
             self._reset()
         return out
 
+    @property
+    def gravity_tilt(self) -> np.ndarray:
+        """(2,) rotation [rad] about the odometry frame's x and y of the gravity the IMU
+        factors use (``gravity_tracking_gain``); settable, e.g. to carry it over to a new
+        estimator in the same odometry frame."""
+        return self._gravity_tilt.copy()
+
+    @gravity_tilt.setter
+    def gravity_tilt(self, tilt: np.ndarray) -> None:
+        tilt = np.asarray(tilt, dtype=float).reshape(2)
+        if not _finite(tilt):
+            raise ValueError("gravity tilt must be finite")
+        self._set_gravity_tilt(tilt)
+
     def _set_gravity_tilt(self, tilt: np.ndarray, reset_average: bool = False) -> None:
         self._gravity_tilt = np.asarray(tilt, dtype=float).copy()
         if reset_average:

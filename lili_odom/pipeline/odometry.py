@@ -270,6 +270,7 @@ class OdometryPipeline:
                 self._new_estimator()  # keeps the map; the state restarts at this scan
                 self.estimator.imu, self.estimator.wheels = old.imu, old.wheels
                 self.estimator.wheel_scale = old.wheel_scale  # same wheels, same calibration
+                self.estimator.gravity_tilt = old.gravity_tilt  # same map, same frame
                 reinit_pose = self._last_output.pose if self._last_output is not None else None
 
         est = self.estimator
