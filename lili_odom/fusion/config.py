@@ -171,8 +171,10 @@ class FusionConfig:
             gravity follows the map's frame (an integral controller; per update, 0..1).
         gravity_tracking_window_s: time constant of that average [s].
         gravity_tracking_deadband: averaged tilt differences up to this [rad] are not
-            integrated: a map built from the estimate lags it by a little whenever the tilt
-            moves, and integrating that lag would walk gravity and map away together.
+            integrated (a map built from the estimate lags it by a little whenever the tilt
+            moves, and integrating that lag can walk gravity and map away together). 0 by
+            default: over the tunnel seeds 0.15 deg (``config/gravity_tracking.yaml``)
+            cost more than it saved (``benchmarks/results/seeds_gravity/seeds.md``).
         gravity_tracking_max: bound of that rotation of gravity [rad].
         gravity_tracking_gate: registrations whose tilt differs from the fused pose's by more
             than this [rad] are not used for it (outliers).
@@ -225,7 +227,7 @@ class FusionConfig:
     estimate_gyro_bias_at_rest: bool = True
     gravity_tracking_gain: float = 0.0
     gravity_tracking_window_s: float = 5.0
-    gravity_tracking_deadband: float = 0.0026
+    gravity_tracking_deadband: float = 0.0
     gravity_tracking_max: float = 0.035
     gravity_tracking_gate: float = 0.05
     wheel_weak_scale: float = 0.0
