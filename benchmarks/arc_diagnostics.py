@@ -98,9 +98,9 @@ def probe(times: list[float], resolution: tuple[int, int], history: float) -> li
     return lines + [""]
 
 
-def errors_in_true_body_frame(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(stamps from the first estimate [s], (n, 4, 4) errors ``T_true^-1 T_est``), both
-    trajectories started at the same pose (no alignment), associated as the metrics do."""
+def _associated(run_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(estimate stamps [s], (n, 4, 4) true poses, (n, 4, 4) estimated poses) of a run
+    directory's ``truth.tum`` / ``estimate.tum``, associated as the metrics do (evo)."""
     from evo.core import sync
     from evo.core.trajectory import PoseTrajectory3D
 
@@ -109,8 +109,13 @@ def errors_in_true_body_frame(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
     trajectories = [PoseTrajectory3D(poses_se3=list(T), timestamps=t)
                     for t, T in (read_tum(run_dir / "truth.tum"), read_tum(run_dir / "estimate.tum"))]
     truth, est = sync.associate_trajectories(*trajectories, max_diff=0.02)
-    T_g, T_e = np.array(truth.poses_se3), np.array(est.poses_se3)
-    t_e = np.asarray(est.timestamps)
+    return np.asarray(est.timestamps), np.array(truth.poses_se3), np.array(est.poses_se3)
+
+
+def errors_in_true_body_frame(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps from the first estimate [s], (n, 4, 4) errors ``T_true^-1 T_est``), both
+    trajectories started at the same pose (no alignment), associated as the metrics do."""
+    t_e, T_g, T_e = _associated(run_dir)
     align = T_g[0] @ np.linalg.inv(T_e[0])  # both start at the same pose
     err = np.einsum("nij,njk->nik", np.linalg.inv(T_g), align @ T_e)
     return t_e - t_e[0], err
@@ -174,19 +179,11 @@ def tilt_series(run_dir: Path, trial: int | None = None, seed: int | None = None
     ((n, 3) [m/s^2], IMU frame) and, with ``trial``/``seed``, the simulator's ``true_bias``."""
     from scipy.spatial.transform import Rotation
 
-    from lili_odom.bagio.tum import read_tum
-
-    t_est, T_est = read_tum(run_dir / "estimate.tum")
-    t_true, T_true = read_tum(run_dir / "truth.tum")
     scans = np.genfromtxt(run_dir / "scans.csv", delimiter=",", names=True)
     if "icp_qw" not in (scans.dtype.names or ()):
         raise ValueError(f"{run_dir}/scans.csv has no registration orientation (older run)")
-    j = np.searchsorted(t_true, t_est).clip(1, len(t_true) - 1)
-    j -= np.abs(t_true[j - 1] - t_est) < np.abs(t_true[j] - t_est)
-    keep = np.abs(t_true[j] - t_est) < 0.02
-    R_true = T_true[j[keep], :3, :3]
-    R_est = T_est[keep, :3, :3]
-    stamps = t_est[keep]
+    stamps, T_true, T_est = _associated(run_dir)
+    R_true, R_est = T_true[:, :3, :3], T_est[:, :3, :3]
     k = np.searchsorted(scans["stamp"], stamps).clip(0, len(scans) - 1)
     row = scans[k]
     q = np.stack([row[f"icp_q{a}"] for a in "xyzw"], axis=1)
