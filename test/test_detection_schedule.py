@@ -90,7 +90,8 @@ def test_max_reuse_zero_detects_every_scan():
 
 
 def test_pipeline_counts_detections_and_reuses():
-    """In a closed room at rest: one detection, then two reuses, then a detection again."""
+    """In a closed room at rest: one detection, then ``max_reuse`` reuses (the default
+    schedule), then a detection again."""
     rng = np.random.default_rng(0)
     faces = []
     for ax in range(3):
@@ -102,12 +103,14 @@ def test_pipeline_counts_detections_and_reuses():
     from lili_odom.pipeline.types import Scan
 
     pipe = OdometryPipeline(PipelineConfig(method="hessian"))
-    outs = [pipe.process_scan(Scan(100.0 + 0.1 * i, room, None)) for i in range(5)]
+    n = pipe.config.detection_schedule.max_reuse
+    assert n >= 1
+    outs = [pipe.process_scan(Scan(100.0 + 0.1 * i, room, None)) for i in range(n + 3)]
     assert all(o is not None for o in outs)
-    # scan 0 initialises (no detection); then detect, reuse, reuse, detect
-    assert pipe.counters["detections"] == 2 and pipe.counters["detections_reused"] == 2
+    # scan 0 initialises (no detection); then detect, n reuses, detect
+    assert pipe.counters["detections"] == 2 and pipe.counters["detections_reused"] == n
     assert [bool(o.degeneracy.details.get("reused")) for o in outs[1:]] == \
-        [False, True, True, False]
+        [False] + [True] * n + [False]
 
 
 def test_invalid_schedule_parameters_are_named():

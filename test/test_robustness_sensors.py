@@ -398,8 +398,9 @@ def test_inner_clock_jump_forwards_without_other_sensors_in_between():
     assert sim.pipe.counters["forward_gaps"] == 1 and sim.pipe.counters["resets"] == 0
     assert len(ok) >= len(after) - 1 and _max_offset(after) < 0.1
     assert all(o.details["used_imu"] for o in ok[3:])
-    # the map is kept, so is the frame's gravity
-    np.testing.assert_allclose(sim.pipe.estimator.gravity_tilt, [1e-3, -2e-3])
+    # the map is kept, so is the frame's gravity (tracking, on by default, then moves it by
+    # a few microradians in 2 s; a reset would have put it back to zero)
+    np.testing.assert_allclose(sim.pipe.estimator.gravity_tilt, [1e-3, -2e-3], atol=1e-4)
 
 
 @inner

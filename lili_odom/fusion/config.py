@@ -168,7 +168,8 @@ class FusionConfig:
             (``benchmarks/arc_diagnostics.py tilt``). With a gain, each LiDAR update moves
             the gravity used by the IMU preintegration by this fraction of the averaged tilt
             between the registration and the fused pose beyond the deadband, so the IMU's
-            gravity follows the map's frame (an integral controller; per update, 0..1).
+            gravity follows the map's frame (an integral controller; per update, 0..1;
+            0.01 by default, ``config/no_gravity_tracking.yaml`` turns it off).
         gravity_tracking_window_s: time constant of that average [s].
         gravity_tracking_deadband: averaged tilt differences up to this [rad] are not
             integrated (a map built from the estimate lags it by a little whenever the tilt
@@ -225,7 +226,7 @@ class FusionConfig:
     gravity_align: bool = True
     gravity_window_s: float = 1.0
     estimate_gyro_bias_at_rest: bool = True
-    gravity_tracking_gain: float = 0.0
+    gravity_tracking_gain: float = 0.01
     gravity_tracking_window_s: float = 5.0
     gravity_tracking_deadband: float = 0.0
     gravity_tracking_max: float = 0.035

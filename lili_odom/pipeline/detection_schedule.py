@@ -51,8 +51,8 @@ class DetectionScheduleConfig:
             length) since the local map was (re)started [m]; 0 = for the whole run.
     """
 
-    max_reuse: int = 2
-    reuse_distance_m: float = 0.3
+    max_reuse: int = 4
+    reuse_distance_m: float = 0.5
     reuse_angle_deg: float = 5.0
     hold_distance_m: float = 1.0
     hold_warmup_m: float = 10.0

@@ -72,7 +72,10 @@ class PipelineConfig:
             ``hybrid`` or ``prior``): without it the registration's slide along the axis
             leaks into the kept components and pins the axial position to the slide
             (``benchmarks/lidar_factor.py``).
-        scan_matcher / fusion / lili / zhang / hessian: the stages' own configurations.
+        scan_matcher / fusion / lili / zhang / hessian: the stages' own configurations; in
+            the odometry LiLi stops a perturbed re-registration once it has come back
+            (``lili.return_ratio`` 0.1, README, Speed), the standalone detector
+            (``lili-odom detect``, the shape benchmark) runs each to convergence.
     """
 
     method: str = "lili"
@@ -87,7 +90,7 @@ class PipelineConfig:
     detection_schedule: DetectionScheduleConfig = field(default_factory=DetectionScheduleConfig)
     scan_matcher: ScanMatcherConfig = field(default_factory=ScanMatcherConfig)
     fusion: FusionConfig = field(default_factory=FusionConfig)
-    lili: LiliConfig = field(default_factory=LiliConfig)
+    lili: LiliConfig = field(default_factory=lambda: LiliConfig(return_ratio=0.1))
     zhang: ZhangConfig = field(default_factory=ZhangConfig)
     hessian: HessianConfig = field(default_factory=HessianConfig)
 
