@@ -2,7 +2,7 @@
 
     python benchmarks/speed.py                        # 300 scans from 90 s and from 5 s of Trial 1
     python benchmarks/speed.py --scans 30 --start 90 --methods kiss lili
-    python benchmarks/speed.py --set lili.return_ratio=0.1 --name speed_return   # opt-in settings
+    python benchmarks/speed.py --set lili.return_ratio=0 --name speed_paper   # other settings
     python benchmarks/speed.py --previous old/speed.json   # also show an earlier run's figures
 
 On the same scans of the simulated tunnel Trial 1 (128 x 1024, seed 0; one piece per window,

@@ -33,15 +33,19 @@ detects), ``tau_displacement = 0.2``, ``tau_pca = 0.25``, 100 ICP iterations at 
 Cost: almost all of it is the 12 perturbed KISS-ICP runs (each runs to convergence, typically
 10-40 iterations; the native call holds the GIL, so Python threads do not overlap them). Most
 runs come back: their registration returns to ``P_opt`` and step 4 rejects their twist. With
-``return_ratio > 0`` (opt-in) such a run is stopped once its displacement ratio has fallen
+``return_ratio > 0`` such a run is stopped once its displacement ratio has fallen
 below ``return_ratio``, checked every ``return_check_iterations`` ICP iterations (KISS-ICP's
 iterations are stateless, so continuing from the pose reached is the same ICP up to rounding);
 runs that do not come back (degenerate directions) run to convergence as before.
 ``benchmarks/detection_cost.py`` finds the detected subspace as close to the paper's as the
 detector is to itself from scan to scan along the tunnel, and ``benchmarks/speed.py`` the
-time (README, Speed). It is not the default:
-on sparse 32 x 256 scans a run can dip below 0.1 and slide out again, and the short
-featureless scenario of ``test/test_degenerate_odometry.py`` is decided by such details.
+time (README, Speed). The detector's own default stays 0 (the paper; ``lili-odom detect``
+and the shape benchmark); the odometry's defaults use 0.1
+(:class:`lili_odom.pipeline.odometry.PipelineConfig`), with which LiLi meets the tunnel
+targets over simulator seeds (``benchmarks/results/seeds_realtime/seeds.md``). A caveat: on
+sparse 32 x 256 scans a run can dip below 0.1 and slide out again, so a direction can be
+missed on such scans (the short featureless scenario of
+``test/test_degenerate_odometry.py`` checks the odometry with it).
 The opt-in ``perturbation_points`` / ``perturbation_iterations`` / ``both_signs=False`` make
 the runs cheaper but change the detected subspace on odometry inputs
 (``benchmarks/lili_speed.py``), so those defaults stay the paper's.
@@ -87,8 +91,8 @@ class LiliConfig:
         return_ratio: stop a perturbed re-registration once the median displacement of its
             pose from P_opt, divided by the perturbation's, is below this (dimensionless, in
             ``[0, tau_displacement)``): the run came back and its twist would be rejected. 0
-            (default) runs every re-registration to convergence (the paper); 0.1 is the
-            measured opt-in (module docstring).
+            (default) runs every re-registration to convergence (the paper); the odometry
+            uses 0.1 (module docstring).
         return_check_iterations: ICP iterations between two such checks (>= 1); each check
             restarts the native ICP from the pose reached, so fewer iterations per check cost
             Python overhead and more stop later.
