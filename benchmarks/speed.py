@@ -399,13 +399,22 @@ def _targets(results: dict[str, dict]) -> dict[str, Any]:
     return t
 
 
+def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The run with the median scans/s (the upper one of an even count), with every run's
+    scans/s in ``repeats_scans_per_s`` (in run order)."""
+    chosen = sorted(runs, key=lambda r: r["scans_per_s"])[len(runs) // 2]
+    return {**chosen, "repeats_scans_per_s": [r["scans_per_s"] for r in runs]}
+
+
 def benchmark(bag: Path | str | dict, methods=METHODS, starts=(90.0, 5.0), scans: int = 300,
               warmup: int = 10, progress: bool = True,
-              overrides: dict[str, str] | None = None) -> dict[str, Any]:
+              overrides: dict[str, str] | None = None, repeats: int = 1) -> dict[str, Any]:
     """Every method on every window, each in a fresh process; the JSON-ready results.
 
     ``bag`` is one bag holding every window (``starts`` are seconds into it), or a dict
-    ``{start: (piece bag, offset of the window in that bag [s])}``.
+    ``{start: (piece bag, offset of the window in that bag [s])}``. With ``repeats`` > 1 the
+    methods run in turn that many rounds per window (so a load change hits all of them), and
+    each method is reported by its run with the median scans/s.
     """
     pieces = bag if isinstance(bag, dict) else {s: (Path(bag), s) for s in starts}
     busy0, _ = _cpu_busy_jiffies()
@@ -415,30 +424,37 @@ def benchmark(bag: Path | str | dict, methods=METHODS, starts=(90.0, 5.0), scans
     t0 = time.monotonic()
     windows = []
     for start in starts:
-        res: dict[str, dict] = {}
-        for method in methods:
-            if progress:
-                print(f"[{start:g} s] {method}: {scans} scans ...", flush=True)
-            b0, _ = _cpu_busy_jiffies()
-            c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-            w0 = time.monotonic()
-            piece, offset = pieces[start]
-            r = _run_in_fresh_process(piece, method, float(offset), scans, warmup, progress,
-                                      overrides)
-            r["other_load_cores"] = _other_load(b0, c0, time.monotonic() - w0)
-            res[method] = r
-            if progress:
-                tot = r["stages"]["total"]
-                det = r["stages"]["detector"]
-                print(f"[{start:g} s] {method}: {r['scans_per_s']:.1f} scans/s, total "
-                      f"{tot['mean_ms']:.1f} ms (p95 {tot['p95_ms']:.1f})"
-                      + (f", detector {det['mean_ms']:.1f} ms" if det else "")
-                      + f", peak RSS {r['rss_peak_mb']:.0f} MB", flush=True)
+        runs: dict[str, list[dict]] = {m: [] for m in methods}
+        for round_ in range(repeats):
+            for method in methods:
+                tag = f"[{start:g} s]" + (f" round {round_ + 1}/{repeats}" if repeats > 1 else "")
+                if progress:
+                    print(f"{tag} {method}: {scans} scans ...", flush=True)
+                b0, _ = _cpu_busy_jiffies()
+                c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+                w0 = time.monotonic()
+                piece, offset = pieces[start]
+                r = _run_in_fresh_process(piece, method, float(offset), scans, warmup,
+                                          progress, overrides)
+                r["other_load_cores"] = _other_load(b0, c0, time.monotonic() - w0)
+                runs[method].append(r)
+                if progress:
+                    tot = r["stages"]["total"]
+                    det = r["stages"]["detector"]
+                    print(f"{tag} {method}: {r['scans_per_s']:.1f} scans/s, total "
+                          f"{tot['mean_ms']:.1f} ms (p95 {tot['p95_ms']:.1f})"
+                          + (f", detector {det['mean_ms']:.1f} ms" if det else "")
+                          + f", peak RSS {r['rss_peak_mb']:.0f} MB", flush=True)
+        res = {m: _median_run(rs) for m, rs in runs.items()}
         kiss = res.get("kiss")
-        for r in res.values():
+        for m, r in res.items():
             r["time_vs_kiss"] = (kiss["scans_per_s"] / r["scans_per_s"]) if kiss else None
+            # the same ratio within each round (runs next to each other in time)
+            r["repeats_time_vs_kiss"] = ([k["scans_per_s"] / x["scans_per_s"]
+                                          for k, x in zip(runs["kiss"], runs[m])]
+                                         if kiss else None)
         windows.append({"start_s": float(start), "name": WINDOW_NAMES.get(float(start), ""),
-                        "methods": res, "targets": _targets(res)})
+                        "methods": res, "targets": _targets(res), "repeats": repeats})
     wall = time.monotonic() - t0
     return {
         "bag": ", ".join(sorted({Path(b).name for b, _ in pieces.values()})),
@@ -544,9 +560,16 @@ def markdown(report: dict[str, Any], command: str) -> str:
                 cells.append("–" if s is None else f"{s['mean_ms']:.1f} / {s['p95_ms']:.1f}")
             label = "KISS-ICP `register_frame`" if name == "kiss" else f"`{name}`"
             deg = "–" if name == "kiss" else f"{100 * r['degenerate_fraction']:.0f} %"
-            lines.append(f"| {label} | {_fmt(r['scans_per_s'])} | {_fmt(r['time_vs_kiss'], 2)} | "
+            reps = r.get("repeats_scans_per_s") or []
+            spread = (f" ({_fmt(min(reps))}-{_fmt(max(reps))})" if len(reps) > 1 else "")
+            lines.append(f"| {label} | {_fmt(r['scans_per_s'])}{spread} | "
+                         f"{_fmt(r['time_vs_kiss'], 2)} | "
                          + " | ".join(cells) + f" | {r['rss_peak_mb']:.0f} | {deg} | "
                          f"{r.get('other_load_cores', float('nan')):.2f} |")
+        lili = w["methods"].get("lili")
+        if w.get("repeats", 1) > 1 and lili and lili.get("repeats_time_vs_kiss"):
+            lines += ["", f"`lili` against KISS-ICP within each of the {w['repeats']} rounds: "
+                      + ", ".join(f"{x:.2f}x" for x in lili["repeats_time_vs_kiss"]) + "."]
         if report.get("previous"):
             lines += _previous_lines(report["previous"], w["start_s"], w["methods"])
         t = w["targets"]
@@ -586,12 +609,17 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="pipeline parameter for our methods instead of its default (dotted "
                     "below pipeline, e.g. lili.return_ratio=0.1; repeatable)")
+    ap.add_argument("--repeats", type=int, default=1,
+                    help="rounds of every method per window; each method is reported by its "
+                    "run with the median scans/s (default 1)")
     ap.add_argument("--previous", type=Path,
                     help="an earlier speed.json whose figures the report shows as 'Before'")
     ap.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.scans <= args.warmup:
         ap.error("--scans must exceed --warmup")
+    if args.repeats < 1:
+        ap.error("--repeats must be at least 1")
     try:
         overrides = dict(item.split("=", 1) for item in args.set)
     except ValueError:
@@ -618,13 +646,15 @@ def main(argv=None) -> int:
     previous = (previous_summary(json.loads(args.previous.read_text()))
                 if args.previous is not None else None)
     report = benchmark(bag, args.methods, args.start, args.scans, args.warmup,
-                       progress=not args.no_progress, overrides=overrides)
+                       progress=not args.no_progress, overrides=overrides,
+                       repeats=args.repeats)
     if previous is not None:
         report["previous"] = previous
     command = (f"python benchmarks/speed.py --scans {args.scans} --start "
                f"{' '.join(f'{s:g}' for s in args.start)} --warmup {args.warmup} "
                f"--methods {' '.join(args.methods)}"
                + "".join(f" --set {k}={v}" for k, v in overrides.items())
+               + (f" --repeats {args.repeats}" if args.repeats > 1 else "")
                + (f" --name {args.name}" if args.name != "speed" else ""))
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / f"{args.name}.json").write_text(json.dumps(report, indent=1) + "\n")

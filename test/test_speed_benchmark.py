@@ -64,3 +64,12 @@ def test_speed_benchmark_reports_every_stage(tiny_bag, tmp_path):
     header = next(line for line in md.splitlines() if line.startswith("| method"))
     separator = md.splitlines()[md.splitlines().index(header) + 1]
     assert header.count("|") == separator.count("|")
+
+
+def test_repeats_report_the_median_run():
+    speed = _load_speed()
+    runs = [{"scans_per_s": v, "tag": i} for i, v in enumerate((3.0, 1.0, 2.0))]
+    chosen = speed._median_run(runs)
+    assert chosen["tag"] == 2 and chosen["scans_per_s"] == 2.0
+    assert chosen["repeats_scans_per_s"] == [3.0, 1.0, 2.0]  # run order kept
+    assert speed._median_run(runs[:2])["tag"] == 0  # even count: the upper of the two middle
