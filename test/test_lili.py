@@ -196,6 +196,25 @@ def test_return_check_keeps_the_plane_subspace():
     assert np.allclose(fast.projector_scaled(), paper.projector_scaled(), atol=0.02)
 
 
+def test_return_check_records_the_ratio_at_every_check():
+    """details["check_ratios"]: per perturbed run the ratios seen at its checks; a run that
+    came back stopped at its first check below return_ratio, the others never went below."""
+    ref, scan, T = plane_pair(seed=1)
+    rm = reference_for_detection(ref)
+    paper = LiliDetector().detect(rm, scan, T)
+    assert paper.details["check_ratios"] == [[]] * len(paper.ratios)  # no checks in one call
+    fast = LiliDetector(LiliConfig(return_ratio=0.1)).detect(rm, scan, T)
+    checks = fast.details["check_ratios"]
+    assert len(checks) == len(fast.ratios)
+    stopped = [c for c in checks if c and c[-1] < 0.1]
+    assert len(stopped) == fast.details["returned_early"] > 0
+    for c in checks:
+        assert all(r >= 0.1 for r in c[:-1])  # the run went on while above the ratio
+    for c, final in zip(checks, fast.ratios):
+        if c and c[-1] < 0.1:
+            assert final == pytest.approx(c[-1])  # stopped there: its final ratio
+
+
 def test_return_check_in_the_node_parameter_table():
     from lili_odom.config import NodeConfig
 

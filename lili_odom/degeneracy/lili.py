@@ -42,9 +42,11 @@ detector is to itself from scan to scan along the tunnel, and ``benchmarks/speed
 time (README, Speed). The detector's own default stays 0 (the paper; ``lili-odom detect``
 and the shape benchmark); the odometry's defaults use 0.1
 (:class:`lili_odom.pipeline.odometry.PipelineConfig`), with which LiLi meets the tunnel
-targets over simulator seeds (``benchmarks/results/seeds_realtime/seeds.md``). A caveat: on
-sparse 32 x 256 scans a run can dip below 0.1 and slide out again, so a direction can be
-missed on such scans (the short featureless scenario of
+targets over simulator seeds (``benchmarks/results/seeds_realtime/seeds.md``). A caveat: a
+run can dip below the ratio and slide out again, so a direction can be missed: along the
+featureless tunnel 1-2 detections in 30-80 at 64 x 512 and 128 x 1024 with 0.1
+(``benchmarks/return_ratio.py`` counts them from each run's ``details["check_ratios"]``),
+more on sparse 32 x 256 scans (the short featureless scenario of
 ``test/test_degenerate_odometry.py`` checks the odometry with it).
 The opt-in ``perturbation_points`` / ``perturbation_iterations`` / ``both_signs=False`` make
 the runs cheaper but change the detected subspace on odometry inputs
@@ -200,8 +202,9 @@ class LiliDetector:
 
     def _reregister(self, points: np.ndarray, reference: ReferenceMap, guess: np.ndarray,
                     gate: float, kernel: float, P_opt_inv: np.ndarray, probe: np.ndarray,
-                    scale: float) -> tuple[AlignmentResult, bool]:
-        """One perturbed re-registration from ``guess``; (result, stopped because it came back).
+                    scale: float) -> tuple[AlignmentResult, bool, list[float]]:
+        """One perturbed re-registration from ``guess``; (result, stopped because it came back,
+        the displacement ratio at each check).
 
         Without ``return_ratio`` one KISS-ICP call to convergence. Otherwise the same ICP in
         pieces of ``return_check_iterations`` iterations, each from the pose the previous one
@@ -212,20 +215,21 @@ class LiliDetector:
         """
         cfg, whole = self.config, self.perturbation_registration
         if not cfg.return_ratio > 0.0:
-            return whole.align(points, reference, guess, gate, kernel), False
-        pose, done = guess, 0
+            return whole.align(points, reference, guess, gate, kernel), False, []
+        pose, done, checks = guess, 0, []
         while True:
             n = min(cfg.return_check_iterations, whole.max_iterations - done)
             res = self._chunk(n).align(points, reference, pose, gate, kernel)
             if not res.ok:
-                return res, False
+                return res, False, checks
             done += n
             step = float(np.linalg.norm(geometry.log(np.linalg.inv(pose) @ res.pose)))
             pose = res.pose
             if done >= whole.max_iterations or step < whole.convergence:
-                return res, False
-            if _median_displacement(P_opt_inv @ pose, probe) / scale < cfg.return_ratio:
-                return res, True
+                return res, False, checks
+            checks.append(_median_displacement(P_opt_inv @ pose, probe) / scale)
+            if checks[-1] < cfg.return_ratio:
+                return res, True, checks
 
     def detect(
         self,
@@ -273,11 +277,14 @@ class LiliDetector:
         ratios = np.zeros(len(deltas))
         valid = np.zeros(len(deltas), dtype=bool)
         returned = 0
+        check_ratios: list[list[float]] = []
         P_opt_inv = np.linalg.inv(P_opt)
         for i, delta in enumerate(deltas):
             scale = max(_median_displacement(geometry.exp(delta), probe), 1e-12)
-            res, came_back = self._reregister(moved, reference, P_opt @ geometry.exp(delta),
-                                              gate, kernel, P_opt_inv, probe, scale)
+            res, came_back, checks = self._reregister(moved, reference,
+                                                      P_opt @ geometry.exp(delta), gate, kernel,
+                                                      P_opt_inv, probe, scale)
+            check_ratios.append(checks)
             if not res.ok:
                 continue
             returned += came_back
@@ -313,5 +320,8 @@ class LiliDetector:
                 "valid_runs": int(valid.sum()),
                 "perturbation_points": len(moved),
                 "returned_early": returned,
+                # per perturbed run, its displacement ratio at each return check (empty
+                # without return_ratio): benchmarks/return_ratio.py
+                "check_ratios": check_ratios,
             },
         )
