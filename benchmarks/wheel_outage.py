@@ -90,6 +90,35 @@ def _per_window(rows: list[dict], configs: list[str]) -> list[str]:
     return lines
 
 
+def _paired(rows: list[dict], configs: list[str]) -> list[str]:
+    """Each configuration after the first against the first, window by window (final error
+    averaged over repeats): mean difference, windows where the first ends further off, and
+    the Wilcoxon signed-rank test's p-value (scipy) of the paired differences."""
+    from scipy.stats import wilcoxon
+
+    def finals(config: str) -> dict[tuple, float]:
+        out: dict[tuple, list[float]] = {}
+        for r in rows:
+            if r["config"] == config:
+                out.setdefault((r["seed"], r["start"]), []).append(r["final_m"])
+        return {w: statistics.mean(v) for w, v in out.items()}
+
+    labels = list(map(_label, configs))
+    base = finals(labels[0])
+    lines = [f"| against `{labels[0]}` | windows | mean difference [m] | `{labels[0]}` further "
+             "off in | Wilcoxon p |", "|---|---|---|---|---|"]
+    for config in labels[1:]:
+        other = finals(config)
+        common = sorted(set(base) & set(other))
+        diff = [base[w] - other[w] for w in common]
+        if not diff:
+            continue
+        p = float(wilcoxon(diff).pvalue) if any(diff) and len(diff) > 1 else float("nan")
+        lines.append(f"| `{config}` | {len(diff)} | {statistics.mean(diff):+.2f} | "
+                     f"{sum(d > 0 for d in diff)} of {len(diff)} | {p:.2f} |")
+    return lines
+
+
 def _plot(rows: list[dict], configs: list[str], path: Path) -> None:
     import matplotlib
 
@@ -135,6 +164,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--resolution", default="32x256")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=RESULTS)
+    ap.add_argument("--reuse", action="store_true",
+                    help="take the runs from OUT/wheel_outage.json (written by the same "
+                    "arguments) instead of running them; rewrites the report")
     args = ap.parse_args(argv)
     for config in args.configs:
         if config != "default" and not (ROOT / config).is_file():
@@ -143,6 +175,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--outage must be in (0, --duration]")
     if args.repeats < 1:
         ap.error("--repeats must be at least 1")
+    if args.reuse:
+        return _report(args, _reused_rows(args))
     bags = {}
     for seed in args.seeds:  # one at a time: each generation uses every core
         for start in args.starts:
@@ -157,6 +191,30 @@ def main(argv: list[str] | None = None) -> int:
             for r in range(args.repeats)]
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         rows = list(pool.map(_run, jobs))
+    return _report(args, rows)
+
+
+def _reused_rows(args: argparse.Namespace) -> list[dict]:
+    """The runs of an earlier invocation with the same arguments (SystemExit otherwise)."""
+    path = args.out / "wheel_outage.json"
+    try:
+        stored = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise SystemExit(f"--reuse: cannot read {path}: {exc}") from None
+    wanted = {(s, float(t), _label(c), r) for s in args.seeds for t in args.starts
+              for c in args.configs for r in range(args.repeats)}
+    rows = [r for r in stored.get("runs", [])
+            if (r["seed"], float(r["start"]), r["config"], r["repeat"]) in wanted]
+    same = all(stored.get(k) == v for k, v in (
+        ("trial", args.trial), ("resolution", args.resolution), ("duration_s", args.duration),
+        ("outage_s", args.outage), ("threads", args.threads)))
+    if not same or len(rows) != len(wanted):
+        raise SystemExit(f"--reuse: {path} holds other runs than these arguments ask for")
+    return rows
+
+
+def _report(args: argparse.Namespace, rows: list[dict]) -> int:
+    """Write wheel_outage.{json,md,png} into ``args.out``."""
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "wheel_outage.json").write_text(json.dumps(
         {"trial": args.trial, "resolution": args.resolution, "duration_s": args.duration,
@@ -181,6 +239,12 @@ def main(argv: list[str] | None = None) -> int:
              "## Over all runs [m]", "", *_summary(rows, args.configs), "",
              "## Per window: ATE / final [m], one pair per repeat", "",
              *_per_window(rows, args.configs), "",
+             "## Paired by window: final error [m]", "",
+             "Positive: the first configuration ends further off. With one run per window "
+             "and configuration a window's error is one draw of a quantity that spreads over "
+             "metres (the outage integrates the IMU's noise), so compare the p-value, not the "
+             "means.", "",
+             *_paired(rows, args.configs), "",
              "![final error per run](wheel_outage.png)", ""]
     (args.out / "wheel_outage.md").write_text("\n".join(lines))
     print("\n".join(lines))

@@ -45,6 +45,30 @@ def test_orthonormalize_repairs_and_rejects():
         g.orthonormalize(np.zeros((4, 4)))
 
 
+def test_orthonormalize_keeps_rotations_and_repairs_the_rest():
+    T = g.exp([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+    T[3] = [0.0, 0.0, 1e-9, 1.0]  # a sloppy last row is always made exact
+    kept = g.orthonormalize(T)
+    assert np.array_equal(kept[:3], T[:3]) and np.array_equal(kept[3], [0, 0, 0, 1])
+    assert kept is not T
+    off = T.copy()
+    off[:3, :3] *= 1.0 + 1e-11  # too far off for Sophus: projected
+    fixed = g.orthonormalize(off)
+    R = fixed[:3, :3]
+    assert np.abs(R.T @ R - np.eye(3)).max() < 1e-14
+    mirrored = T.copy()
+    mirrored[:3, 0] *= -1.0  # orthonormal, but a reflection
+    R = g.orthonormalize(mirrored)[:3, :3]
+    assert np.linalg.det(R) == pytest.approx(1.0)
+
+
+def test_det3_matches_numpy():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        M = rng.normal(size=(3, 3))
+        assert g._det3(M) == pytest.approx(np.linalg.det(M), rel=1e-12, abs=1e-12)
+
+
 def test_scaling_round_trip():
     xi = np.array([1.0, 2.0, 3.0, 0.1, 0.2, 0.3])
     s = g.scale_twist(xi, 10.0)
