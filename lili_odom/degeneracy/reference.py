@@ -85,7 +85,7 @@ class ReferenceMap:
         if len(points) < 2:
             return float("nan")
         probes = points[:: max(1, -(-len(points) // SPACING_PROBES))]
-        d, _ = self.kdtree.query(probes, k=2)
+        d, _ = self.kdtree.query(probes, k=2, workers=-1)
         return float(np.median(d[:, 1]))
 
     def normals(self, k: int = 10) -> tuple[np.ndarray, np.ndarray]:
