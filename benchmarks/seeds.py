@@ -4,12 +4,12 @@ difference between two configurations is the configuration, and how much the see
     python benchmarks/seeds.py                                   # Trial 1, seeds 0-2, 2 configs
     python benchmarks/seeds.py --trials 1 2 --seeds 0 1 2 3 --configs default config/x.yaml
 
-One ``lili`` run per (trial, seed, configuration), 64 x 512 by default, ``--jobs`` in
-parallel (about 10 min per Trial 1 run on one core). A seed changes everything the simulator
+One run per (trial, seed, configuration, method: ``lili`` unless ``--methods`` says more), 64
+x 512 by default, ``--jobs`` in parallel (about 10 min per Trial 1 ``lili`` run on one core). A seed changes everything the simulator
 draws: the IMU, wheel and LiDAR noise, the wheel slip events and the wheel calibration error;
 the tunnel and the path stay the same. Bags are generated once into the simulator cache
-(``data/sim``); runs go to ``data/seed_runs/<trial>_<seed>_<config>`` and are reused with
-``--reuse``. Writes ``benchmarks/results/seeds.{md,json}``: ATE (evo, SE(3)-aligned
+(``data/sim``); runs go to ``data/seed_runs/<trial>_<seed>_<config>`` (``..._<method>`` for a
+method other than ``lili``) and are reused with ``--reuse``. Writes ``benchmarks/results/seeds.{md,json}``: ATE (evo, SE(3)-aligned
 translation RMSE) and RPE (100 m) per run, and per configuration the mean and the worst over
 the seeds, against the issue's targets (Trial 1 ATE <= 0.25 m, RPE <= 0.40 m; Trial 2 ATE
 <= 0.45 m).
@@ -33,8 +33,10 @@ from lili_odom.sim.generator import ensure_trial_bag  # noqa: E402
 TARGETS = {1: {"ate_m": 0.25, "rpe_m": 0.40}, 2: {"ate_m": 0.45}}
 
 
-def _label(config: str) -> str:
-    return "default" if config == "default" else Path(config).stem
+def _label(config: str, method: str = "lili") -> str:
+    """A run's name: the configuration's, with the method unless it is ``lili``."""
+    name = "default" if config == "default" else Path(config).stem
+    return name if method == "lili" else f"{name}_{method}"
 
 
 def _true_wheel_scale(bag: Path) -> float | None:
@@ -54,9 +56,9 @@ def _final_wheel_scale(scans_csv: Path) -> float | None:
     return float(rows[-1]["wheel_scale"]) if rows and "wheel_scale" in rows[0] else None
 
 
-def _run(job: tuple[int, int, str, str, Path, bool]) -> dict:
-    trial, seed, config, resolution, work, reuse = job
-    out = work / f"trial{trial}_seed{seed}_{_label(config)}"
+def _run(job: tuple[int, int, str, str, str, Path, bool]) -> dict:
+    trial, seed, config, method, resolution, work, reuse = job
+    out = work / f"trial{trial}_seed{seed}_{_label(config, method)}"
     metrics = out / "metrics.json"
     if not (reuse and metrics.exists()):
         if out.exists():
@@ -64,11 +66,12 @@ def _run(job: tuple[int, int, str, str, Path, bool]) -> dict:
         bag = ensure_trial_bag(trial, ROOT / "data" / "sim", resolution=resolution, seed=seed,
                                progress=False, jobs=1)
         cfg = load_config(None if config == "default" else ROOT / config)
-        cfg.pipeline.method = "lili"
+        cfg.pipeline.method = method
         run_bag(bag, cfg, out, progress=False)
     summary = json.loads(metrics.read_text())
     m = summary["metrics"]
-    row = {"trial": trial, "seed": seed, "config": _label(config), "ate_m": m["ate_rmse_m"],
+    row = {"trial": trial, "seed": seed, "config": _label(config, method), "method": method,
+           "ate_m": m["ate_rmse_m"],
            "rpe_m": m["rpe_rmse_m"], "final_m": m["final_error_m"],
            "degenerate_share": summary["degenerate_fraction"],
            "wheel_scale_true": _true_wheel_scale(Path(summary["bag"])),
@@ -77,11 +80,11 @@ def _run(job: tuple[int, int, str, str, Path, bool]) -> dict:
     return row
 
 
-def _table(rows: list[dict], trials: list[int], seeds: list[int], configs: list[str]) -> list[str]:
+def _table(rows: list[dict], trials: list[int], seeds: list[int], labels: list[str]) -> list[str]:
     lines = ["| trial | configuration | " + " | ".join(f"seed {s}" for s in seeds)
              + " | mean | worst | target |", "|---|---|" + "---|" * (len(seeds) + 3)]
     for trial in trials:
-        for config in map(_label, configs):
+        for config in labels:
             mine = {r["seed"]: r for r in rows if r["trial"] == trial and r["config"] == config}
             cells = [f"{mine[s]['ate_m']:.3f} / {mine[s]['rpe_m']:.3f}" for s in seeds]
             ate = [mine[s]["ate_m"] for s in seeds]
@@ -103,6 +106,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--configs", nargs="+", default=["default", "config/hybrid_factor.yaml"],
                     help="'default' or ROS 2 parameter files (relative to the repository)")
+    ap.add_argument("--methods", nargs="+", default=["lili"],
+                    choices=("lili", "zhang", "hessian", "none"),
+                    help="detectors to run each configuration with (default lili)")
     ap.add_argument("--resolution", default="64x512")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--reuse", action="store_true", help="keep runs that already have metrics")
@@ -117,18 +123,21 @@ def main(argv: list[str] | None = None) -> int:
         for seed in args.seeds:
             ensure_trial_bag(trial, ROOT / "data" / "sim", resolution=args.resolution, seed=seed,
                              progress=False)
-    jobs = [(t, s, c, args.resolution, args.work_dir, args.reuse)
-            for t in args.trials for s in args.seeds for c in args.configs]
+    jobs = [(t, s, c, m, args.resolution, args.work_dir, args.reuse)
+            for t in args.trials for s in args.seeds for c in args.configs for m in args.methods]
+    labels = [_label(c, m) for c in args.configs for m in args.methods]
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         rows = list(pool.map(_run, jobs))
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "seeds.json").write_text(json.dumps(rows, indent=1) + "\n")
     lines = ["# Tunnel trials over simulator seeds", "",
              f"`python benchmarks/seeds.py --trials {' '.join(map(str, args.trials))} --seeds "
-             f"{' '.join(map(str, args.seeds))} --configs {' '.join(args.configs)}` (OS1 at "
-             f"{args.resolution}, `lili`). Cells: ATE / RPE(100 m) [m] (evo; ATE SE(3)-aligned); "
+             f"{' '.join(map(str, args.seeds))} --configs {' '.join(args.configs)}"
+             + (f" --methods {' '.join(args.methods)}" if args.methods != ["lili"] else "")
+             + f"` (OS1 at {args.resolution}, `{'`, `'.join(args.methods)}`; a configuration "
+             "named `<configuration>_<method>` is run with that detector). Cells: ATE / RPE(100 m) [m] (evo; ATE SE(3)-aligned); "
              "target: runs meeting the issue's target.", "",
-             *_table(rows, args.trials, args.seeds, args.configs)]
+             *_table(rows, args.trials, args.seeds, labels)]
     lines += ["", "Wheel scale (wheel odometry distance / true distance) of each run: the "
               "simulator's, and the online estimate at the run's end (`scans.csv`), with its "
               "error; inside the degenerate subspace the estimate divides the wheel distance, "

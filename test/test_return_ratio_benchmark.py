@@ -1,16 +1,9 @@
 """benchmarks/return_ratio.py: the counting of stops, crossings and saved ICP calls."""
-import importlib.util
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[1]
+from _benchmark_module import load_benchmark
 
 
 def _load():
-    spec = importlib.util.spec_from_file_location("return_ratio_benchmark",
-                                                  ROOT / "benchmarks" / "return_ratio.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("return_ratio")
 
 
 def test_evaluate_counts_stops_crossings_and_saved_calls():

@@ -4,22 +4,18 @@ Correctness only (the result's shape and plausibility), never speed thresholds.
 """
 from __future__ import annotations
 
-import importlib.util
 import math
 from pathlib import Path
 
 import pytest
 
+from _benchmark_module import load_benchmark
 from lili_odom.cli import main as cli_main
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _load_speed():
-    spec = importlib.util.spec_from_file_location("speed_benchmark", ROOT / "benchmarks" / "speed.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("speed")
 
 
 @pytest.fixture(scope="module")

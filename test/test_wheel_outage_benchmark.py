@@ -1,22 +1,14 @@
 """benchmarks/wheel_outage.py: the paired comparison and the reuse of stored runs."""
 import argparse
-import importlib.util
 import json
-import sys
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from _benchmark_module import load_benchmark
 
 
 def _load():
-    sys.path.insert(0, str(ROOT / "benchmarks"))  # it imports faults.py beside it
-    spec = importlib.util.spec_from_file_location("wheel_outage_benchmark",
-                                                  ROOT / "benchmarks" / "wheel_outage.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("wheel_outage")
 
 
 def _row(config, seed, start, final, repeat=0):
