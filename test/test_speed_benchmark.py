@@ -13,7 +13,6 @@ from _benchmark_module import load_benchmark
 from lili_odom.cli import main as cli_main
 
 
-
 def _load_speed():
     return load_benchmark("speed")
 
