@@ -20,8 +20,10 @@ Repeats of the same run need not be identical by default: KISS-ICP's parallel re
 runs slower).
 
 Writes ``benchmarks/results/wheel_outage.{md,json,png}``: ATE (evo, SE(3)-aligned translation
-RMSE), largest and final position error [m] of every run, and per configuration the mean,
-median and worst over all runs.
+RMSE), largest and final position error [m] of every run, per configuration the mean, median
+and worst over all runs, and each configuration against the first, window by window (mean
+difference of the final errors and the Wilcoxon signed-rank p-value). ``--reuse`` rewrites
+the report from the stored runs of the same arguments.
 """
 from __future__ import annotations
 
@@ -240,10 +242,9 @@ def _report(args: argparse.Namespace, rows: list[dict]) -> int:
              "## Per window: ATE / final [m], one pair per repeat", "",
              *_per_window(rows, args.configs), "",
              "## Paired by window: final error [m]", "",
-             "Positive: the first configuration ends further off. With one run per window "
-             "and configuration a window's error is one draw of a quantity that spreads over "
-             "metres (the outage integrates the IMU's noise), so compare the p-value, not the "
-             "means.", "",
+             "Positive: the first configuration ends further off. A window's final error "
+             "(averaged over its repeats) is one draw of a quantity that spreads over metres "
+             "(the outage integrates the IMU's noise), so read the p-value, not the means.", "",
              *_paired(rows, args.configs), "",
              "![final error per run](wheel_outage.png)", ""]
     (args.out / "wheel_outage.md").write_text("\n".join(lines))
