@@ -5,7 +5,8 @@ size beside it); reported: the peak RSS (``getrusage``), and the linear trend of
 half in MB per 100 scans (local map pruning and the bounded fusion window should make it
 flat). The run itself keeps only the estimated poses (about 0.03 MB per 100 scans); the
 ground truth is read after it. ``--set`` overrides pipeline parameters and ``--no-save``
-only prints (for looking for a growth). Adds the ``long_run`` section to ``benchmarks/results/robustness.{json,md}`` and writes
+only prints (for looking for a growth). Adds the ``long_run`` section to
+``benchmarks/results/robustness.{json,md}`` and writes
 ``benchmarks/results/long_run_memory.png``.
 
     python benchmarks/long_run.py                          # method none, 32x256 (~10 min)
