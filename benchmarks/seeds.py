@@ -4,15 +4,16 @@ difference between two configurations is the configuration, and how much the see
     python benchmarks/seeds.py                                   # Trial 1, seeds 0-2, 2 configs
     python benchmarks/seeds.py --trials 1 2 --seeds 0 1 2 3 --configs default config/x.yaml
 
-One run per (trial, seed, configuration, method: ``lili`` unless ``--methods`` says more), 64
-x 512 by default, ``--jobs`` in parallel (about 10 min per Trial 1 ``lili`` run on one core). A seed changes everything the simulator
-draws: the IMU, wheel and LiDAR noise, the wheel slip events and the wheel calibration error;
-the tunnel and the path stay the same. Bags are generated once into the simulator cache
-(``data/sim``); runs go to ``data/seed_runs/<trial>_<seed>_<config>`` (``..._<method>`` for a
-method other than ``lili``) and are reused with ``--reuse``. Writes ``benchmarks/results/seeds.{md,json}``: ATE (evo, SE(3)-aligned
-translation RMSE) and RPE (100 m) per run, and per configuration the mean and the worst over
-the seeds, against the issue's targets (Trial 1 ATE <= 0.25 m, RPE <= 0.40 m; Trial 2 ATE
-<= 0.45 m).
+One run per (trial, seed, configuration, method: ``lili`` unless ``--methods`` says more),
+64 x 512 by default, ``--jobs`` in parallel (about 10 min per Trial 1 ``lili`` run on one
+core). A seed changes everything the simulator draws: the IMU, wheel and LiDAR noise, the
+wheel slip events and the wheel calibration error; the tunnel and the path stay the same.
+Bags are generated once into the simulator cache (``data/sim``); runs go to
+``data/seed_runs/<trial>_<seed>_<config>`` (``..._<method>`` for a method other than
+``lili``) and are reused with ``--reuse``. Writes ``benchmarks/results/seeds.{md,json}``:
+ATE (evo, SE(3)-aligned translation RMSE) and RPE (100 m) per run, and per configuration the
+mean and the worst over the seeds, against the issue's targets (Trial 1 ATE <= 0.25 m, RPE
+<= 0.40 m; Trial 2 ATE <= 0.45 m).
 """
 from __future__ import annotations
 
@@ -135,8 +136,9 @@ def main(argv: list[str] | None = None) -> int:
              f"{' '.join(map(str, args.seeds))} --configs {' '.join(args.configs)}"
              + (f" --methods {' '.join(args.methods)}" if args.methods != ["lili"] else "")
              + f"` (OS1 at {args.resolution}, `{'`, `'.join(args.methods)}`; a configuration "
-             "named `<configuration>_<method>` is run with that detector). Cells: ATE / RPE(100 m) [m] (evo; ATE SE(3)-aligned); "
-             "target: runs meeting the issue's target.", "",
+             "named `<configuration>_<method>` is run with that detector). Cells: ATE / "
+             "RPE(100 m) [m] (evo; ATE SE(3)-aligned); target: runs meeting the issue's "
+             "target.", "",
              *_table(rows, args.trials, args.seeds, labels)]
     lines += ["", "Wheel scale (wheel odometry distance / true distance) of each run: the "
               "simulator's, and the online estimate at the run's end (`scans.csv`), with its "

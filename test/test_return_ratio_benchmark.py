@@ -16,7 +16,8 @@ def test_evaluate_counts_stops_crossings_and_saved_calls():
         {"check_ratios": [[]], "final_ratios": [0.9], "dimension": 1},  # converged at once
     ]}
     low = rr.evaluate(trace, 0.1)
-    assert (low["runs"], low["stopped"], low["crossings"], low["detections_changed"]) == (4, 1, 0, 0)
+    counts = (low["runs"], low["stopped"], low["crossings"], low["detections_changed"])
+    assert counts == (4, 1, 0, 0)
     assert low["calls_full"] == 5 + 3 + 4 + 1
     assert low["calls_saved"] == 3  # the chunks after run 1's second check
     high = rr.evaluate(trace, 0.15)
