@@ -68,7 +68,7 @@ def main(argv=None) -> int:
     from lili_odom.bagio.reader import BagReader
     from lili_odom.config import apply_overrides, load_config
     from lili_odom.evaluation.faults import run_stream
-    from lili_odom.messages import odometry_pose_from_msg
+    from lili_odom.messages import truth_sample
     from lili_odom.sim.generator import ensure_trial_bag
 
     bag = ensure_trial_bag(args.trial, resolution=args.resolution, seed=0,
@@ -110,13 +110,7 @@ def main(argv=None) -> int:
         run = run_stream(limited(reader), cfg, on_output=on_output)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     with BagReader(bag, topics=[cfg.ground_truth_topic]) as reader:
-        for item in reader:
-            try:
-                stamp, T = odometry_pose_from_msg(item.msg)
-            except (AttributeError, TypeError, ValueError):
-                continue
-            if np.isfinite(stamp) and np.all(np.isfinite(T)):
-                run.truth.append((stamp, T))
+        run.truth.extend(filter(None, (truth_sample(item.msg) for item in reader)))
     arr = np.array(samples, dtype=float)
     scans, rss, points = arr[:, 0], arr[:, 2], arr[:, 3]
     trend, half = second_half_trend(scans, rss)

@@ -50,6 +50,7 @@ __all__ = [
     "imu_from_msg",
     "wheel_from_msg",
     "odometry_pose_from_msg",
+    "truth_sample",
     "scan_from_msg",
     "default_cloud_parser",
     "transforms_from_tf_msg",
@@ -176,6 +177,16 @@ def wheel_from_msg(msg: Any) -> WheelSample:
 def odometry_pose_from_msg(msg: Any) -> tuple[float, np.ndarray]:
     """``nav_msgs/Odometry`` -> (stamp [s], 4x4 pose of child in header frame); e.g. truth."""
     return stamp_seconds(msg.header), pose_to_matrix(msg.pose.pose)
+
+
+def truth_sample(msg: Any) -> tuple[float, np.ndarray] | None:
+    """:func:`odometry_pose_from_msg` for ground truth: None for a malformed or non-finite
+    message (the evaluation skips it)."""
+    try:
+        stamp, T = odometry_pose_from_msg(msg)
+    except (AttributeError, TypeError, ValueError):
+        return None
+    return (stamp, T) if np.isfinite(stamp) and np.all(np.isfinite(T)) else None
 
 
 _WARNINGS = ThrottledWarnings(log)

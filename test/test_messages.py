@@ -81,6 +81,18 @@ def test_odometry_round_trip_through_wheel_reader(f):
 
 
 @pytest.mark.parametrize("f", FACTORIES)
+def test_truth_sample_skips_malformed_and_non_finite(f):
+    out = _output()
+    stamp, T = M.truth_sample(M.odometry_msg(f, out, "map", "base_link"))
+    assert stamp == pytest.approx(out.stamp, abs=1e-6)
+    np.testing.assert_allclose(T, out.pose, atol=1e-12)
+    bad = M.odometry_msg(f, out, "map", "base_link")
+    bad.pose.pose.position.x = float("nan")
+    assert M.truth_sample(bad) is None
+    assert M.truth_sample(object()) is None  # not an Odometry at all
+
+
+@pytest.mark.parametrize("f", FACTORIES)
 def test_wheel_twist_covariance_kept_in_v_w_order(f):
     cov = np.diag([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
     msg = f.new(

@@ -275,7 +275,7 @@ def run_stream(items: Iterable[Any], config: Any, *,
         on_output: called as ``on_output(output, pipeline)`` after every processed scan
             (e.g. to sample memory).
     """
-    from lili_odom.messages import odometry_pose_from_msg
+    from lili_odom.messages import truth_sample
     from lili_odom.pipeline.feeder import MessageFeeder
     from lili_odom.pipeline.odometry import OdometryPipeline
 
@@ -294,12 +294,9 @@ def run_stream(items: Iterable[Any], config: Any, *,
     for item in items:
         topic, msg, _ = _stamp_of(item)
         if topic == config.ground_truth_topic:
-            try:
-                stamp, T = odometry_pose_from_msg(msg)
-            except (AttributeError, TypeError, ValueError):
-                continue
-            if np.isfinite(stamp) and np.all(np.isfinite(T)):
-                run.truth.append((stamp, T))
+            sample = truth_sample(msg)
+            if sample is not None:
+                run.truth.append(sample)
             continue
         if topic not in wanted:
             continue

@@ -96,7 +96,7 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
     from lili_odom.bagio.reader import BagReader
     from lili_odom.bagio.tum import write_tum
     from lili_odom.bagio.writer import OutputBagWriter
-    from lili_odom.messages import odometry_pose_from_msg
+    from lili_odom.messages import truth_sample
     from lili_odom.pipeline.feeder import MessageFeeder
     from lili_odom.pipeline.odometry import OdometryPipeline
 
@@ -143,12 +143,9 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
         for item in reader:
             bar.advance()
             if item.topic == config.ground_truth_topic:
-                try:
-                    stamp, T_truth = odometry_pose_from_msg(item.msg)
-                except (AttributeError, TypeError, ValueError):
-                    continue
-                if np.isfinite(stamp) and np.all(np.isfinite(T_truth)):
-                    run.truth.append((stamp, T_truth))
+                sample = truth_sample(item.msg)
+                if sample is not None:
+                    run.truth.append(sample)
                 continue
             done = bool(max_scans) and scans >= max_scans
             if item.topic == config.lidar_topic:
