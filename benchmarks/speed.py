@@ -121,7 +121,7 @@ def run_method(bag: Path | str, method: str, start: float, scans: int, warmup: i
     Returns a JSON-ready dict: scans, scans_per_s, stages (mean/p95/max ms or None),
     rss_peak_mb, rss_setup_mb, degenerate_fraction, counters.
     """
-    from lili_odom import messages
+    from lili_odom import geometry, messages
     from lili_odom.config import load_config
 
     logging.basicConfig(level=logging.ERROR)
@@ -243,12 +243,13 @@ def run_method(bag: Path | str, method: str, start: float, scans: int, warmup: i
                 t0 = time.perf_counter()
                 scan = timed_scan_from_msg(item.msg, parse_fn)
                 t1 = time.perf_counter()
-                pts = scan.points
-                finite = np.all(np.isfinite(pts), axis=1)
-                pts = pts[finite]
+                # the same input guard as the pipeline's (OdometryPipeline.process_scan)
+                pts, t = scan.points, scan.times
+                bad = geometry.nonfinite_rows(pts)
+                if bad is not None:
+                    pts, t = pts[~bad], (None if t is None or len(t) != len(bad) else t[~bad])
                 times = np.zeros(0)
-                if scan.times is not None and len(scan.times) == len(finite):
-                    t = scan.times[finite]
+                if t is not None and len(t) == len(pts):
                     if len(t) and np.all(np.isfinite(t)) and np.ptp(t) > 0:
                         times = (t - t.min()) / np.ptp(t)
                 kiss.register_frame(pts, times)

@@ -75,3 +75,11 @@ def test_scaling_round_trip():
     assert np.allclose(s, [1, 2, 3, 1, 2, 3])
     assert np.allclose(g.unscale_twist(s, 10.0), xi)
     assert np.allclose(g.scaling_matrix(10.0) @ xi, s)
+
+
+def test_nonfinite_rows_marks_exactly_the_bad_rows():
+    points = np.arange(30, dtype=float).reshape(10, 3)
+    assert g.nonfinite_rows(points) is None
+    points[2, 1], points[7, 0], points[7, 2], points[9, 2] = np.nan, np.inf, -np.inf, np.nan
+    np.testing.assert_array_equal(np.flatnonzero(g.nonfinite_rows(points)), [2, 7, 9])
+    assert g.nonfinite_rows(np.empty((0, 3))) is None

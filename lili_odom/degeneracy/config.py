@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lili_odom.geometry import nonfinite_rows
+
 
 @dataclass
 class RegistrationConfig:
@@ -55,7 +57,8 @@ def characteristic_length(scan: np.ndarray) -> float:
 def finite_points(scan: np.ndarray) -> np.ndarray:
     """(N, 3) float64 copy of ``scan`` without non-finite rows."""
     scan = np.asarray(scan, dtype=np.float64).reshape(-1, 3)
-    return scan[np.all(np.isfinite(scan), axis=1)]
+    bad = nonfinite_rows(scan)
+    return scan.copy() if bad is None else scan[~bad]
 
 
 def usable_length(scan: np.ndarray) -> float:

@@ -19,7 +19,7 @@ from kiss_icp.mapping import VoxelHashMap
 from kiss_icp.registration import Registration
 from scipy.spatial import cKDTree
 
-from lili_odom.geometry import is_valid_pose, orthonormalize, transform_points
+from lili_odom.geometry import is_valid_pose, nonfinite_rows, orthonormalize, transform_points
 
 MIN_POINTS = 10
 SPACING_PROBES = 4000
@@ -50,7 +50,9 @@ class ReferenceMap:
     ) -> "ReferenceMap":
         """Build a map from (N, 3) reference points [m] in the reference frame."""
         points = np.asarray(points, dtype=np.float64)
-        points = points[np.all(np.isfinite(points), axis=1)]
+        bad = nonfinite_rows(points)
+        if bad is not None:
+            points = points[~bad]
         vm = VoxelHashMap(voxel_size, max_distance, max_points_per_voxel)
         if len(points):
             vm.add_points(points)
@@ -144,8 +146,9 @@ class GuardedRegistration:
         except ValueError as exc:
             return AlignmentResult(np.eye(4), False, f"invalid initial guess: {exc}")
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        if not np.isfinite(points).all():
-            points = points[np.all(np.isfinite(points), axis=1)]
+        bad = nonfinite_rows(points)
+        if bad is not None:
+            points = points[~bad]
         if len(points) < MIN_POINTS:
             return AlignmentResult(guess, False, f"only {len(points)} finite scan points")
         if reference.voxel_map.empty():

@@ -238,11 +238,11 @@ class OdometryPipeline:
         warnings: list[str] = []
         self.counters["scans"] += 1
         points = np.asarray(scan.points, dtype=np.float64).reshape(-1, 3)
-        finite = np.all(np.isfinite(points), axis=1)
-        if not finite.all():
-            points = points[finite]
-            scan = Scan(scan.stamp, points, None if scan.times is None else scan.times[finite],
-                        scan.frame_id, scan.dropped + int((~finite).sum()))
+        bad = geometry.nonfinite_rows(points)
+        if bad is not None:
+            points = points[~bad]
+            scan = Scan(scan.stamp, points, None if scan.times is None else scan.times[~bad],
+                        scan.frame_id, scan.dropped + int(bad.sum()))
         if not np.isfinite(scan.stamp):
             self._skip("skipped_bad_stamp", "non-finite stamp")
             return None
