@@ -51,7 +51,7 @@ class DetectionScheduleConfig:
             length) since the local map was (re)started [m]; 0 = for the whole run.
     """
 
-    max_reuse: int = 4
+    max_reuse: int = 6
     reuse_distance_m: float = 0.5
     reuse_angle_deg: float = 5.0
     hold_distance_m: float = 1.0
