@@ -41,14 +41,6 @@ PIECES = {"entrance": 0.0, "featureless": 70.0}
 DEFAULT_OUT = ROOT / "benchmarks" / "results"
 
 
-def _relative(path: Path) -> str:
-    """``path`` relative to the repository when it is inside it (for the recorded command)."""
-    try:
-        return str(path.resolve().relative_to(ROOT))
-    except ValueError:
-        return str(path)
-
-
 def largest_angle_deg(A: np.ndarray, B: np.ndarray) -> float:
     """Largest principal angle [deg] between the row spaces of orthonormal A and B (same k)."""
     s = np.linalg.svd(A @ B.T, compute_uv=False)
@@ -191,7 +183,7 @@ def main(argv=None) -> int:
                + (f" --pieces {' '.join(args.pieces)}" if args.pieces != list(PIECES) else "")
                + "".join(f" --variant {name} " + " ".join(f"{k}={v}" for k, v in o.items())
                          for name, o in (variants.items() if args.variant else ()))
-               + (f" --out {_relative(args.out)}" if args.out != DEFAULT_OUT else ""))
+               + (f" --out {args.out}" if args.out != DEFAULT_OUT else ""))
     report = {"method": args.method, "resolution": args.resolution, "duration": args.duration,
               "command": command,
               "reuse_distance_m": defaults.reuse_distance_m,

@@ -32,6 +32,8 @@ from lili_odom.evaluation.runner import run_bag  # noqa: E402
 from lili_odom.sim.generator import ensure_trial_bag  # noqa: E402
 
 TARGETS = {1: {"ate_m": 0.25, "rpe_m": 0.40}, 2: {"ate_m": 0.45}}
+RESOLUTION = "64x512"
+DEFAULT_OUT = ROOT / "benchmarks" / "results"
 
 
 def _label(config: str, method: str = "lili") -> str:
@@ -110,11 +112,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--methods", nargs="+", default=["lili"],
                     choices=("lili", "zhang", "hessian", "none"),
                     help="detectors to run each configuration with (default lili)")
-    ap.add_argument("--resolution", default="64x512")
+    ap.add_argument("--resolution", default=RESOLUTION)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--reuse", action="store_true", help="keep runs that already have metrics")
     ap.add_argument("--work-dir", type=Path, default=ROOT / "data" / "seed_runs")
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
+    ap.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = ap.parse_args(argv)
     for config in args.configs:
         if config != "default" and not (ROOT / config).is_file():
@@ -135,6 +137,8 @@ def main(argv: list[str] | None = None) -> int:
              f"`python benchmarks/seeds.py --trials {' '.join(map(str, args.trials))} --seeds "
              f"{' '.join(map(str, args.seeds))} --configs {' '.join(args.configs)}"
              + (f" --methods {' '.join(args.methods)}" if args.methods != ["lili"] else "")
+             + (f" --resolution {args.resolution}" if args.resolution != RESOLUTION else "")
+             + (f" --out {args.out}" if args.out != DEFAULT_OUT else "")
              + f"` (OS1 at {args.resolution}, `{'`, `'.join(args.methods)}`; a configuration "
              "named `<configuration>_<method>` is run with that detector). Cells: ATE / "
              "RPE(100 m) [m] (evo; ATE SE(3)-aligned); target: runs meeting the issue's "
