@@ -44,8 +44,8 @@ class DetectionScheduleConfig:
         max_reuse: consecutive scans that may reuse one detection (0: detect every scan).
             Default 6: at the Husky's 0.8-1 m/s the 0.5 m bound ends a reuse after 5-6
             scans, so the detector runs about once per 0.5 m of travel (at least every 7th
-            scan when slower); 4 before. Both agree with the paper's every-scan detection
-            as well as the detector agrees with itself from one scan to the next
+            scan when slower); 4 before. The subspaces agree with the paper's every-scan
+            detection as well as the detector agrees with itself from one scan to the next
             (``benchmarks/results/detection_cost_schedule``).
         reuse_distance_m: re-detect once the sensor moved this far from the detection [m].
         reuse_angle_deg: re-detect once the sensor turned this much from the detection [deg].
