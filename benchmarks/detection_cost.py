@@ -38,6 +38,7 @@ from lili_odom.evaluation.runner import run_bag  # noqa: E402
 from lili_odom.sim.generator import ensure_trial_bag  # noqa: E402
 
 PIECES = {"entrance": 0.0, "featureless": 70.0}
+RESOLUTION = "64x512"
 DEFAULT_OUT = ROOT / "benchmarks" / "results"
 
 
@@ -161,7 +162,7 @@ def main(argv=None) -> int:
     ap.add_argument("--variant", nargs="+", action="append", metavar=("NAME", "KEY=VALUE"),
                     help="a variant (repeatable): a name and pipeline overrides; replaces the "
                     "default variants")
-    ap.add_argument("--resolution", default="64x512")
+    ap.add_argument("--resolution", default=RESOLUTION)
     ap.add_argument("--duration", type=float, default=40.0)
     ap.add_argument("--pieces", nargs="+", default=list(PIECES), choices=list(PIECES))
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT)
@@ -178,7 +179,7 @@ def main(argv=None) -> int:
     defaults = load_config(None).pipeline.detection_schedule
     command = ("python benchmarks/detection_cost.py"
                + (f" --method {args.method}" if args.method != "lili" else "")
-               + (f" --resolution {args.resolution}" if args.resolution != "64x512" else "")
+               + (f" --resolution {args.resolution}" if args.resolution != RESOLUTION else "")
                + (f" --duration {args.duration:g}" if args.duration != 40.0 else "")
                + (f" --pieces {' '.join(args.pieces)}" if args.pieces != list(PIECES) else "")
                + "".join(f" --variant {name} " + " ".join(f"{k}={v}" for k, v in o.items())

@@ -83,3 +83,4 @@ def test_nonfinite_rows_marks_exactly_the_bad_rows():
     points[2, 1], points[7, 0], points[7, 2], points[9, 2] = np.nan, np.inf, -np.inf, np.nan
     np.testing.assert_array_equal(np.flatnonzero(g.nonfinite_rows(points)), [2, 7, 9])
     assert g.nonfinite_rows(np.empty((0, 3))) is None
+    np.testing.assert_array_equal(g.drop_nonfinite_rows(points), points[[0, 1, 3, 4, 5, 6, 8]])

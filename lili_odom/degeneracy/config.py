@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lili_odom.geometry import nonfinite_rows
+from lili_odom.geometry import drop_nonfinite_rows
 
 
 @dataclass
@@ -56,9 +56,7 @@ def characteristic_length(scan: np.ndarray) -> float:
 
 def finite_points(scan: np.ndarray) -> np.ndarray:
     """(N, 3) float64 copy of ``scan`` without non-finite rows."""
-    scan = np.asarray(scan, dtype=np.float64).reshape(-1, 3)
-    bad = nonfinite_rows(scan)
-    return scan.copy() if bad is None else scan[~bad]
+    return drop_nonfinite_rows(np.array(scan, dtype=np.float64).reshape(-1, 3))
 
 
 def usable_length(scan: np.ndarray) -> float:

@@ -19,7 +19,8 @@ from kiss_icp.mapping import VoxelHashMap
 from kiss_icp.registration import Registration
 from scipy.spatial import cKDTree
 
-from lili_odom.geometry import is_valid_pose, nonfinite_rows, orthonormalize, transform_points
+from lili_odom.geometry import (drop_nonfinite_rows, is_valid_pose, orthonormalize,
+                                transform_points)
 
 MIN_POINTS = 10
 SPACING_PROBES = 4000
@@ -49,10 +50,7 @@ class ReferenceMap:
         max_distance: float = 1e4,
     ) -> "ReferenceMap":
         """Build a map from (N, 3) reference points [m] in the reference frame."""
-        points = np.asarray(points, dtype=np.float64)
-        bad = nonfinite_rows(points)
-        if bad is not None:
-            points = points[~bad]
+        points = drop_nonfinite_rows(np.asarray(points, dtype=np.float64))
         vm = VoxelHashMap(voxel_size, max_distance, max_points_per_voxel)
         if len(points):
             vm.add_points(points)
@@ -145,10 +143,7 @@ class GuardedRegistration:
             guess = orthonormalize(initial_guess)
         except ValueError as exc:
             return AlignmentResult(np.eye(4), False, f"invalid initial guess: {exc}")
-        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        bad = nonfinite_rows(points)
-        if bad is not None:
-            points = points[~bad]
+        points = drop_nonfinite_rows(np.asarray(points, dtype=np.float64).reshape(-1, 3))
         if len(points) < MIN_POINTS:
             return AlignmentResult(guess, False, f"only {len(points)} finite scan points")
         if reference.voxel_map.empty():

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from lili_odom.errors import UserError
-from lili_odom.geometry import nonfinite_rows
+from lili_odom.geometry import drop_nonfinite_rows
 
 _PCD_TYPES = {("F", 4): "f4", ("F", 8): "f8", ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4",
               ("I", 8): "i8", ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4", ("U", 8): "u8"}
@@ -38,10 +38,7 @@ def load_points(path: str | Path) -> np.ndarray:
     pts = np.asarray(pts)
     if pts.ndim != 2 or pts.shape[1] < 3 or not np.issubdtype(pts.dtype, np.number):
         raise UserError(f"{path}: expected an N x 3 numeric array, got shape {pts.shape}")
-    pts = pts[:, :3].astype(np.float64)
-    bad = nonfinite_rows(pts)
-    if bad is not None:
-        pts = pts[~bad]
+    pts = drop_nonfinite_rows(pts[:, :3].astype(np.float64))
     if len(pts) == 0:
         raise UserError(f"{path}: no finite points")
     return pts
