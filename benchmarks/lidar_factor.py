@@ -45,7 +45,7 @@ def _variant(what: str, **overrides: object) -> tuple[dict[str, object], str]:
 #: variant -> (pipeline parameter overrides, what it is)
 VARIANTS: dict[str, tuple[dict[str, object], str]] = {
     "between": _variant("between factor from the previous fused pose "
-                        "(config/between_factor.yaml)"),
+                        "(benchmarks/configs/between_factor.yaml)"),
     "between_remap": _variant("between, registration remapped to the wheels",
                               remap_iterations=10),
     "prior": _variant("absolute prior factor", fusion__lidar__factor="prior",
@@ -53,12 +53,12 @@ VARIANTS: dict[str, tuple[dict[str, object], str]] = {
     "prior_remap": _variant("prior, registration remapped to the wheels",
                             fusion__lidar__factor="prior", remap_iterations=10),
     "prior_anchor": _variant("prior, degenerate components anchored to the wheels "
-                             "(config/prior_factor.yaml)", fusion__lidar__factor="prior",
+                             "(benchmarks/configs/prior_factor.yaml)", fusion__lidar__factor="prior",
                              fusion__lidar__anchor_sigma=0.02, fusion__lidar__basis_snap=0.1),
     "hybrid": _variant("prior in translation and yaw, between in roll and pitch",
                        fusion__lidar__factor="hybrid"),
     "hybrid_remap": _variant("hybrid, registration remapped to the wheels "
-                             "(config/hybrid_factor.yaml; the defaults add the hold)",
+                             "(benchmarks/configs/hybrid_factor.yaml; the defaults add the hold)",
                              fusion__lidar__factor="hybrid", remap_iterations=10),
 }
 SAMPLE_TIMES = (60.0, 120.0, 180.0, 220.0, 240.0, 300.0)

@@ -107,7 +107,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--trials", type=int, nargs="+", default=[1], choices=(1, 2))
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    ap.add_argument("--configs", nargs="+", default=["default", "config/hybrid_factor.yaml"],
+    ap.add_argument("--configs", nargs="+",
+                    default=["default", "benchmarks/configs/hybrid_factor.yaml"],
                     help="'default' or ROS 2 parameter files (relative to the repository)")
     ap.add_argument("--methods", nargs="+", default=["lili"],
                     choices=("lili", "zhang", "hessian", "none"),

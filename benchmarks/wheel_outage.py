@@ -1,7 +1,7 @@
 """Wheel outage over several tunnel windows, seeds and repeats, per configuration (issue #6).
 
     python benchmarks/wheel_outage.py                       # ~10 min on 2 cores
-    python benchmarks/wheel_outage.py --configs default config/marginalized_wheels.yaml \\
+    python benchmarks/wheel_outage.py --configs default benchmarks/configs/marginalized_wheels.yaml \\
         --seeds 0 1 2 --starts 70 150 --repeats 2
     python benchmarks/wheel_outage.py --threads 1 --repeats 2   # bit-identical repeats
 
@@ -158,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--outage", type=float, default=20.0,
                     help="no wheels for the last OUTAGE seconds of each piece")
     ap.add_argument("--configs", nargs="+",
-                    default=["default", "config/marginalized_wheels.yaml"],
+                    default=["default", "benchmarks/configs/marginalized_wheels.yaml"],
                     help="'default' or ROS 2 parameter files (relative to the repository)")
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--threads", type=int, default=0,

@@ -7,28 +7,61 @@ import pytest
 from lili_odom import geometry
 from lili_odom.config import NodeConfig, apply_params, flatten, load_config, pose_from_xyz_rpy
 
-YAML = Path(__file__).resolve().parents[1] / "config" / "lili_odom.yaml"
+ROOT = Path(__file__).resolve().parents[1]
+YAML = ROOT / "config" / "lili_odom.yaml"
+ADVANCED = ROOT / "config" / "lili_odom_advanced.yaml"
 
 
-def test_shipped_yaml_covers_every_parameter_with_its_default():
+def _flat(d, prefix=""):
+    out = {}
+    for k, v in d.items():
+        out.update(_flat(v, f"{prefix}{k}.") if isinstance(v, dict) else {f"{prefix}{k}": v})
+    return out
+
+
+def _params(path):
+    import yaml
+
+    return _flat(yaml.safe_load(path.read_text())["lili_odom"]["ros__parameters"])
+
+
+def test_advanced_file_is_generated_from_the_dataclasses():
+    from lili_odom.config import advanced_yaml
+
+    assert ADVANCED.read_text() == advanced_yaml(), \
+        "regenerate: python -m lili_odom.config advanced > config/lili_odom_advanced.yaml"
+
+
+def test_robot_and_advanced_files_together_hold_every_parameter_once_with_its_default():
+    from lili_odom.config import ROBOT_PARAMETERS
+
+    robot, advanced = _params(YAML), _params(ADVANCED)
+    assert set(robot) == set(ROBOT_PARAMETERS)
+    assert not set(robot) & set(advanced)
+    assert {**robot, **advanced} == flatten(NodeConfig())
+    for path in (YAML, ADVANCED):
+        cfg = load_config(path)
+        assert cfg.pipeline.method == "lili"
+        assert geometry.is_valid_pose(cfg.pipeline.fusion.T_base_lidar)
+
+
+def test_every_advanced_parameter_is_documented():
+    from lili_odom.config import ROBOT_PARAMETERS, parameter_docs
+
+    docs = parameter_docs()
+    assert set(docs) == set(flatten(NodeConfig()))
+    assert [k for k, v in docs.items() if not v and k not in ROBOT_PARAMETERS] == []
+    text = ADVANCED.read_text()
+    assert "# scan points handed to the detector" in text
+
+
+def test_all_defaults_file_round_trips():
     import yaml
 
     from lili_odom.config import default_yaml
 
-    assert YAML.read_text() == default_yaml(), "regenerate: python -m lili_odom.config > config/lili_odom.yaml"
-
-    data = yaml.safe_load(YAML.read_text())["lili_odom"]["ros__parameters"]
-
-    def flat(d, prefix=""):
-        out = {}
-        for k, v in d.items():
-            out.update(flat(v, f"{prefix}{k}.") if isinstance(v, dict) else {f"{prefix}{k}": v})
-        return out
-
-    assert flat(data) == flatten(NodeConfig())
-    cfg = load_config(YAML)
-    assert cfg.pipeline.method == "lili"
-    assert geometry.is_valid_pose(cfg.pipeline.fusion.T_base_lidar)
+    data = yaml.safe_load(default_yaml())["lili_odom"]["ros__parameters"]
+    assert _flat(data) == flatten(NodeConfig())
 
 
 def test_default_extrinsics_follow_the_ouster_convention():
@@ -74,7 +107,8 @@ def test_apply_overrides_reads_yaml_scalars_below_the_prefix() -> None:
         apply_overrides(NodeConfig(), {"lili.return_ratio": "2.0"})
 
 
-SHIPPED = sorted(p for p in YAML.parent.glob("*.yaml") if p != YAML)
+SHIPPED = sorted([ROOT / "config" / "deterministic.yaml",
+                  *(ROOT / "benchmarks" / "configs").glob("*.yaml")])
 
 
 @pytest.mark.parametrize("path", SHIPPED, ids=[p.stem for p in SHIPPED])
@@ -88,5 +122,5 @@ def test_deterministic_config_puts_every_native_thread_count_at_one():
     defaults = flatten(load_config(None))
     threads = [k for k in defaults if k.endswith("max_threads")]
     assert len(threads) >= 4  # the scan matcher and each detector's registration
-    cfg = flatten(load_config(YAML.parent / "deterministic.yaml"))
+    cfg = flatten(load_config(ROOT / "config" / "deterministic.yaml"))
     assert {k: cfg[k] for k in threads} == {k: 1 for k in threads}

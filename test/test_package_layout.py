@@ -58,5 +58,7 @@ def test_launch_file_starts_the_installed_executable_with_the_node_name_and_para
     assert ast.literal_eval(kw["package"]) == "lili_odom"
     assert ast.literal_eval(kw["executable"]) == "lili_odom_node"
     assert ast.literal_eval(kw["name"]) == "lili_odom"  # so outputs are /lili_odom/...
-    assert '"lili_odom.yaml"' in src and "use_sim_time" in src
+    assert '"lili_odom.yaml"' in src and '"lili_odom_advanced.yaml"' in src
+    assert "use_sim_time" in src
     assert (ROOT / "config" / "lili_odom.yaml").is_file()
+    assert (ROOT / "config" / "lili_odom_advanced.yaml").is_file()

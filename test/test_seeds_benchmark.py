@@ -9,7 +9,7 @@ def _load():
 def test_run_names_and_table_per_method():
     seeds = _load()
     assert seeds._label("default") == "default"
-    assert seeds._label("config/frequent_detection.yaml") == "frequent_detection"
+    assert seeds._label("benchmarks/configs/frequent_detection.yaml") == "frequent_detection"
     assert seeds._label("default", "zhang") == "default_zhang"
     rows = [{"trial": 1, "seed": s, "config": label, "ate_m": ate, "rpe_m": 0.3}
             for s in (0, 1) for label, ate in (("default", 0.1 + s), ("default_zhang", 0.4))]
