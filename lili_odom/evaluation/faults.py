@@ -17,9 +17,9 @@ Windows are ``(t0, t1)`` in seconds *after the first stamp of the stream* (so th
 options fit any bag or bag piece); :attr:`FaultInjector.stats` counts what was seen, dropped
 and delayed per topic.
 
-:func:`run_stream` is the offline runner's loop (:func:`lili_odom.evaluation.runner.run_bag`:
-the same :class:`~lili_odom.pipeline.feeder.MessageFeeder`, the same truth handling) over any
-iterator of messages, without writing output files, and returns the trajectory, the truth, the
+:func:`run_stream` runs the replay loop (:class:`~lili_odom.evaluation.replay.Replay`, as
+:func:`lili_odom.evaluation.runner.run_bag` does) over any iterator of messages, without
+writing output files, and returns the trajectory, the truth, the
 counters and the scan accounting (:meth:`StreamRun.accounting`): every cloud that entered
 the stream is either dropped by the injector, rejected by the reader, rejected by the parser
 (``bad_clouds``), skipped by the pipeline (``skipped_*``, ``fusion_rejected``) or processed.
@@ -275,37 +275,21 @@ def run_stream(items: Iterable[Any], config: Any, *,
         on_output: called as ``on_output(output, pipeline)`` after every processed scan
             (e.g. to sample memory).
     """
-    from lili_odom.messages import truth_sample
-    from lili_odom.pipeline.feeder import MessageFeeder
-    from lili_odom.pipeline.odometry import OdometryPipeline
+    from lili_odom.evaluation.replay import Replay
 
-    pipeline = OdometryPipeline(config.pipeline)
-    feeder = MessageFeeder(pipeline, config)
     run = StreamRun(method=config.pipeline.method)
-    wanted = {config.lidar_topic, config.imu_topic, config.wheel_topic, "/tf_static"}
 
-    def record(out) -> None:
+    def record(out, pipeline) -> None:
         run.estimates.append((out.stamp, np.asarray(out.pose, dtype=np.float64)))
         run.dimensions.append(out.degeneracy.dimension if out.degeneracy is not None else 0)
         if on_output is not None:
             on_output(out, pipeline)
 
+    replay = Replay(config, on_output=record)
     t0 = time.perf_counter()
-    for item in items:
-        topic, msg, _ = _stamp_of(item)
-        if topic == config.ground_truth_topic:
-            sample = truth_sample(msg)
-            if sample is not None:
-                run.truth.append(sample)
-            continue
-        if topic not in wanted:
-            continue
-        if topic == config.lidar_topic:
-            run.clouds_in += 1
-        for out in feeder.feed(topic, msg):
-            record(out)
-    for out in feeder.flush():
-        record(out)
+    replay.run((_stamp_of(item)[:2] for item in items))
     run.wall_time_s = time.perf_counter() - t0
-    run.counters = dict(pipeline.counters)
+    run.truth = replay.truth
+    run.clouds_in = replay.clouds_in
+    run.counters = dict(replay.pipeline.counters)
     return run

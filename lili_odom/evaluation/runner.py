@@ -1,8 +1,8 @@
 """Offline odometry over a bag: the node's pipeline, as fast as possible, with its evaluation.
 
 :func:`run_bag` is what ``lili-odom run`` and the benchmarks call. It reads the bag in header-stamp
-order through the same :class:`~lili_odom.pipeline.feeder.MessageFeeder` as the node and
-writes into ``out_dir``:
+order through the replay loop (:class:`~lili_odom.evaluation.replay.Replay`: the same
+:class:`~lili_odom.pipeline.feeder.MessageFeeder` as the node) and writes into ``out_dir``:
 
 * ``odometry/``: rosbag2 mcap with ``/lili_odom/odometry``, ``path``, degeneracy markers and JSON
   basis, ``/tf`` and the final local map;
@@ -96,9 +96,7 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
     from lili_odom.bagio.reader import BagReader
     from lili_odom.bagio.tum import write_tum
     from lili_odom.bagio.writer import OutputBagWriter
-    from lili_odom.messages import truth_sample
-    from lili_odom.pipeline.feeder import MessageFeeder
-    from lili_odom.pipeline.odometry import OdometryPipeline
+    from lili_odom.evaluation.replay import Replay
 
     out_dir = Path(out_dir)
     if (out_dir / "odometry").exists():
@@ -109,20 +107,19 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
         raise UserError(f"{out_dir}: cannot create the output directory: "
                         f"{exc.strerror or exc}") from None
 
-    pipeline = OdometryPipeline(config.pipeline)
-    feeder = MessageFeeder(pipeline, config)
     topics = [config.lidar_topic, config.imu_topic, config.wheel_topic, config.ground_truth_topic,
               "/tf_static"]
     run = OfflineRun(method=config.pipeline.method)
     rows: list[list[float]] = []
+    replay = Replay(config)
+    pipeline = replay.pipeline
     t_wall = time.perf_counter()
     with BagReader(bag, topics=topics, required=[config.lidar_topic]) as reader, \
             OutputBagWriter(out_dir / "odometry", odom_frame=config.odom_frame,
                             base_frame=config.base_frame) as writer:
         bar = _Progress(reader.message_count, not progress, progress_label)
-        scans = 0
 
-        def record(out) -> None:
+        def record(out, _pipeline) -> None:
             dim = out.degeneracy.dimension if out.degeneracy is not None else 0
             run.estimates.append((out.stamp, out.pose))
             run.dimensions.append(dim)
@@ -140,24 +137,14 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
                          *_vector(out.details.get("gravity_tilt"), 2)])
             writer.write_output(out)
 
-        for item in reader:
-            bar.advance()
-            if item.topic == config.ground_truth_topic:
-                sample = truth_sample(item.msg)
-                if sample is not None:
-                    run.truth.append(sample)
-                continue
-            done = bool(max_scans) and scans >= max_scans
-            if item.topic == config.lidar_topic:
-                if done:  # keep feeding IMU/wheels until the last scan has its data
-                    continue
-                scans += 1
-            for out in feeder.feed(item.topic, item.msg):
-                record(out)
-            if done and not feeder.pending:
-                break
-        for out in feeder.flush():
-            record(out)
+        def advancing(items):
+            for item in items:
+                bar.advance()
+                yield item
+
+        replay.on_output = record
+        replay.run(advancing(reader), max_scans=max_scans)
+        run.truth = replay.truth
         bar.close()
         if run.estimates:
             writer.write_map(pipeline.local_map_points(), run.estimates[-1][0])
