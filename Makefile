@@ -1,5 +1,6 @@
 # Two commands for a fresh machine: `make demo` and `make test`. Each creates the virtual
-# environment and installs what it needs by itself.
+# environment and installs what it needs by itself. Benchmarks run from the repository root as
+# modules (`python -m benchmarks.NAME`) and write benchmarks/results/.
 PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
@@ -26,22 +27,22 @@ demo: $(STAMP)
 		--start 70 --duration 40 --out demo_output
 
 benchmark-shapes: $(STAMP)
-	$(PY) benchmarks/shapes.py
+	$(PY) -m benchmarks.shapes
 
 # Table II: Trials 1 and 2, every method, OS1 at 64 x 512 (bags ~6 GB in data/sim, ~1.5 h on
-# 2 cores); `python benchmarks/tunnel.py --resolution 128x1024` for the full sensor (~22 GB).
+# 2 cores); `python -m benchmarks.tunnel --resolution 128x1024` for the full sensor (~22 GB).
 benchmark-tunnel: $(STAMP)
-	$(PY) benchmarks/tunnel.py --resolution 64x512 --jobs 2
+	$(PY) -m benchmarks.tunnel --resolution 64x512 --jobs 2
 
 benchmark-speed: $(STAMP)
-	$(PY) benchmarks/speed.py
+	$(PY) -m benchmarks.speed
 
 benchmark-detection-cost: $(STAMP)
-	$(PY) benchmarks/detection_cost.py
+	$(PY) -m benchmarks.detection_cost
 
 benchmark-robustness: $(STAMP)
-	$(PY) benchmarks/faults.py --resolution 32x256 --play-rates
-	$(PY) benchmarks/long_run.py
+	$(PY) -m benchmarks.faults --resolution 32x256 --play-rates
+	$(PY) -m benchmarks.long_run
 
 clean:
 	rm -rf $(VENV) build install log *.egg-info

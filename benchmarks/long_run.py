@@ -1,4 +1,4 @@
-"""Long run memory (issue #6): the odometry over the whole of Trial 2 (430 m) with RSS sampled.
+"""Long run memory: the odometry over the whole of Trial 2 (430 m) with RSS sampled.
 
 RSS is read from ``/proc/self/statm`` every ``--every`` processed scans (and the local map
 size beside it); reported: the peak RSS (``getrusage``), and the linear trend of the second
@@ -9,8 +9,8 @@ only prints (for looking for a growth). Adds the ``long_run`` section to
 ``benchmarks/results/robustness.{json,md}`` and writes
 ``benchmarks/results/long_run_memory.png``.
 
-    python benchmarks/long_run.py                          # method none, 32x256 (~10 min)
-    python benchmarks/long_run.py --method lili --resolution 128x1024
+    python -m benchmarks.long_run                          # method none, 32x256 (~10 min)
+    python -m benchmarks.long_run --method lili --resolution 128x1024
 """
 from __future__ import annotations
 
@@ -20,12 +20,11 @@ import os
 import resource
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from faults import RESULTS, save_results  # noqa: E402
+from benchmarks._common import SET_HELP, apply_set, parse_set
+from benchmarks.faults import RESULTS, save_results
 
 PAGE_MB = os.sysconf("SC_PAGE_SIZE") / 2 ** 20
 
@@ -53,20 +52,15 @@ def main(argv=None) -> int:
     ap.add_argument("--every", type=int, default=20, help="sample RSS every N scans")
     ap.add_argument("--max-scans", type=int, default=0, help="stop after N scans (0 = all)")
     ap.add_argument("--no-progress", action="store_true")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="pipeline parameter instead of its default (dotted below pipeline, "
-                    "e.g. fusion.gravity_tracking_gain=0; repeatable)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=SET_HELP)
     ap.add_argument("--no-save", action="store_true",
                     help="print the figures only; leave robustness.md and the plot as they are")
     args = ap.parse_args(argv)
-    try:
-        overrides = dict(item.split("=", 1) for item in args.set)
-    except ValueError:
-        ap.error("--set takes KEY=VALUE")
+    overrides = parse_set(args.set, "long_run")
     logging.basicConfig(level=logging.ERROR)
 
     from lili_odom.bagio.reader import BagReader
-    from lili_odom.config import apply_overrides, load_config
+    from lili_odom.config import load_config
     from lili_odom.evaluation.faults import run_stream
     from lili_odom.messages import truth_sample
     from lili_odom.sim.generator import ensure_trial_bag
@@ -75,11 +69,7 @@ def main(argv=None) -> int:
                            progress=not args.no_progress)
     cfg = load_config(None)
     cfg.pipeline.method = args.method
-    try:
-        apply_overrides(cfg, overrides)
-        cfg.validate()
-    except ValueError as exc:
-        ap.error(str(exc))
+    apply_set(cfg, overrides, "long_run")
     # the ground truth (100 Hz) is read after the run: kept along the run it would be this
     # benchmark's own memory growth (~0.3 MB per 100 scans), not the odometry's
     topics = [cfg.lidar_topic, cfg.imu_topic, cfg.wheel_topic, "/tf_static"]

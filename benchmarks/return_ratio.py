@@ -1,7 +1,7 @@
 """Which ``lili.return_ratio`` leaves LiLi's detected subspace unchanged, and what it saves.
 
-    python benchmarks/return_ratio.py                       # Trial 1, 64x512, two 40 s pieces
-    python benchmarks/return_ratio.py --resolution 128x1024 --starts 2 87 --duration 15
+    python -m benchmarks.return_ratio                       # Trial 1, 64x512, two 40 s pieces
+    python -m benchmarks.return_ratio --resolution 128x1024 --starts 2 87 --duration 15
 
 In the odometry a perturbed re-registration is run in pieces of ``return_check_iterations``
 ICP iterations and stopped once the displacement ratio of the pose reached (median displacement
@@ -22,18 +22,14 @@ ICP calls saved. Writes ``benchmarks/results/return_ratio.{md,json}``.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+from benchmarks._common import RESULTS, ROOT, SIM_CACHE, write_results
+from lili_odom.evaluation.return_check import return_check_effect
 
 CANDIDATES = (0.05, 0.1, 0.15, 0.19)
 #: below any ratio a real run reaches: every run goes to convergence, checked all the way
@@ -69,30 +65,6 @@ def trace_piece(job: dict) -> dict:
             "tau_displacement": cfg.pipeline.lili.tau_displacement,
             "check_iterations": cfg.pipeline.lili.return_check_iterations,
             "detections": detections}
-
-
-def evaluate(trace: dict, ratio: float) -> dict:
-    """What ``return_ratio = ratio`` would have changed and saved on one traced piece."""
-    tau = trace["tau_displacement"]
-    runs = stopped = crossings = changed = calls_full = calls_saved = 0
-    for det in trace["detections"]:
-        changed_here = False
-        for checks, final in zip(det["check_ratios"], det["final_ratios"]):
-            runs += 1
-            calls_full += len(checks) + 1  # a chunk before each check, and the last one
-            first = next((k for k, c in enumerate(checks) if c < ratio), None)
-            if first is None:
-                continue
-            stopped += 1
-            calls_saved += len(checks) - first  # the chunks after the stopping check
-            if final > tau:
-                crossings += 1
-                changed_here = True
-        changed += changed_here
-    return {"ratio": ratio, "detections": len(trace["detections"]), "runs": runs,
-            "stopped": stopped, "crossings": crossings, "detections_changed": changed,
-            "calls_full": calls_full, "calls_saved": calls_saved,
-            "calls_saved_fraction": calls_saved / calls_full if calls_full else 0.0}
 
 
 def markdown(report: dict) -> str:
@@ -131,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--duration", type=float, default=40.0, help="piece length [s]")
     ap.add_argument("--ratios", type=float, nargs="+", default=list(CANDIDATES))
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
+    ap.add_argument("--out", type=Path, default=RESULTS)
     ap.add_argument("--name", default="return_ratio")
     args = ap.parse_args(argv)
     if not args.ratios or any(not 0.0 < r < 1.0 for r in args.ratios):
@@ -143,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
 
     jobs = []
     for start in args.starts:  # one at a time: each generation uses every core
-        bag = ensure_trial_bag(args.trial, ROOT / "data" / "sim", resolution=args.resolution,
+        bag = ensure_trial_bag(args.trial, SIM_CACHE, resolution=args.resolution,
                                seed=args.seed, start=float(start),
                                duration=float(args.duration), progress=False)
         jobs.append({"piece": f"Trial {args.trial} from {start:g} s",
@@ -151,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"tracing {len(jobs)} piece(s) ...", flush=True)
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         traces = list(pool.map(trace_piece, jobs))
-    command = ("python benchmarks/return_ratio.py"
+    command = ("python -m benchmarks.return_ratio"
                + (f" --resolution {args.resolution}" if args.resolution != "64x512" else "")
                + (f" --seed {args.seed}" if args.seed else "")
                + f" --starts {' '.join(f'{s:g}' for s in args.starts)}"
@@ -161,14 +133,12 @@ def main(argv: list[str] | None = None) -> int:
         "seed": args.seed, "tau_displacement": traces[0]["tau_displacement"],
         "check_iterations": traces[0]["check_iterations"],
         "pieces": [{"piece": t["piece"], "bag": t["bag"], "scans": t["scans"],
-                    "candidates": [evaluate(t, r) for r in sorted(args.ratios)]}
+                    "candidates": [return_check_effect(t, r) for r in sorted(args.ratios)]}
                    for t in traces],
     }
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / f"{args.name}.json").write_text(json.dumps(report, indent=1) + "\n")
-    (args.out / f"{args.name}.md").write_text(markdown(report))
+    path = write_results(args.out, args.name, markdown(report), report)
     print(markdown(report))
-    print(f"wrote {args.out / (args.name + '.md')}")
+    print(f"wrote {path}")
     return 0
 
 

@@ -1,8 +1,8 @@
 """The tunnel trials over several simulator seeds, per configuration (how much of a
 difference between two configurations is the configuration, and how much the seed).
 
-    python benchmarks/seeds.py                                   # Trial 1, seeds 0-2, 2 configs
-    python benchmarks/seeds.py --trials 1 2 --seeds 0 1 2 3 --configs default config/x.yaml
+    python -m benchmarks.seeds                                   # Trial 1, seeds 0-2, 2 configs
+    python -m benchmarks.seeds --trials 1 2 --seeds 0 1 2 3 --configs default benchmarks/configs/x.yaml
 
 One run per (trial, seed, configuration, method: ``lili`` unless ``--methods`` says more),
 64 x 512 by default, ``--jobs`` in parallel (about 10 min per Trial 1 ``lili`` run on one
@@ -23,23 +23,16 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-
-from lili_odom.config import load_config  # noqa: E402
-from lili_odom.evaluation.runner import run_bag  # noqa: E402
-from lili_odom.sim.generator import ensure_trial_bag  # noqa: E402
+from benchmarks._common import RESULTS, ROOT, SIM_CACHE
+from lili_odom.config import load_config
+from lili_odom.evaluation.comparison import run_label as _label
+from lili_odom.evaluation.comparison import seeds_table
+from lili_odom.evaluation.runner import run_bag
+from lili_odom.sim.generator import ensure_trial_bag
 
 TARGETS = {1: {"ate_m": 0.25, "rpe_m": 0.40}, 2: {"ate_m": 0.45}}
 RESOLUTION = "64x512"
-DEFAULT_OUT = ROOT / "benchmarks" / "results"
-
-
-def _label(config: str, method: str = "lili") -> str:
-    """A run's name: the configuration's, with the method unless it is ``lili``."""
-    name = "default" if config == "default" else Path(config).stem
-    return name if method == "lili" else f"{name}_{method}"
+DEFAULT_OUT = RESULTS
 
 
 def _true_wheel_scale(bag: Path) -> float | None:
@@ -66,7 +59,7 @@ def _run(job: tuple[int, int, str, str, str, Path, bool]) -> dict:
     if not (reuse and metrics.exists()):
         if out.exists():
             raise SystemExit(f"{out}: exists; remove it or pass --reuse")
-        bag = ensure_trial_bag(trial, ROOT / "data" / "sim", resolution=resolution, seed=seed,
+        bag = ensure_trial_bag(trial, SIM_CACHE, resolution=resolution, seed=seed,
                                progress=False, jobs=1)
         cfg = load_config(None if config == "default" else ROOT / config)
         cfg.pipeline.method = method
@@ -81,26 +74,6 @@ def _run(job: tuple[int, int, str, str, str, Path, bool]) -> dict:
            "wheel_scale_final": _final_wheel_scale(out / "scans.csv")}
     print(json.dumps(row), flush=True)
     return row
-
-
-def _table(rows: list[dict], trials: list[int], seeds: list[int], labels: list[str]) -> list[str]:
-    lines = ["| trial | configuration | " + " | ".join(f"seed {s}" for s in seeds)
-             + " | mean | worst | target |", "|---|---|" + "---|" * (len(seeds) + 3)]
-    for trial in trials:
-        for config in labels:
-            mine = {r["seed"]: r for r in rows if r["trial"] == trial and r["config"] == config}
-            cells = [f"{mine[s]['ate_m']:.3f} / {mine[s]['rpe_m']:.3f}" for s in seeds]
-            ate = [mine[s]["ate_m"] for s in seeds]
-            rpe = [mine[s]["rpe_m"] for s in seeds]
-            target = TARGETS.get(trial, {})
-            inf = float("inf")
-            met = sum(a <= target.get("ate_m", inf) and r <= target.get("rpe_m", inf)
-                      for a, r in zip(ate, rpe))
-            goal = " and ".join(f"{k[:3].upper()} <= {v}" for k, v in target.items())
-            lines.append(f"| {trial} | `{config}` | " + " | ".join(cells)
-                         + f" | {sum(ate) / len(ate):.3f} / {sum(rpe) / len(rpe):.3f}"
-                         f" | {max(ate):.3f} / {max(rpe):.3f} | {goal}: {met} of {len(seeds)} |")
-    return lines
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -125,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     # bags first, one at a time (each generation uses every core)
     for trial in args.trials:
         for seed in args.seeds:
-            ensure_trial_bag(trial, ROOT / "data" / "sim", resolution=args.resolution, seed=seed,
+            ensure_trial_bag(trial, SIM_CACHE, resolution=args.resolution, seed=seed,
                              progress=False)
     jobs = [(t, s, c, m, args.resolution, args.work_dir, args.reuse)
             for t in args.trials for s in args.seeds for c in args.configs for m in args.methods]
@@ -135,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "seeds.json").write_text(json.dumps(rows, indent=1) + "\n")
     lines = ["# Tunnel trials over simulator seeds", "",
-             f"`python benchmarks/seeds.py --trials {' '.join(map(str, args.trials))} --seeds "
+             f"`python -m benchmarks.seeds --trials {' '.join(map(str, args.trials))} --seeds "
              f"{' '.join(map(str, args.seeds))} --configs {' '.join(args.configs)}"
              + (f" --methods {' '.join(args.methods)}" if args.methods != ["lili"] else "")
              + (f" --resolution {args.resolution}" if args.resolution != RESOLUTION else "")
@@ -144,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
              "named `<configuration>_<method>` is run with that detector). Cells: ATE / "
              "RPE(100 m) [m] (evo; ATE SE(3)-aligned); target: runs meeting the issue's "
              "target.", "",
-             *_table(rows, args.trials, args.seeds, labels)]
+             *seeds_table(rows, args.trials, args.seeds, labels, TARGETS)]
     lines += ["", "Wheel scale (wheel odometry distance / true distance) of each run: the "
               "simulator's, and the online estimate at the run's end (`scans.csv`), with its "
               "error; inside the degenerate subspace the estimate divides the wheel distance, "

@@ -6,7 +6,7 @@ Measures
      with 1 and 2 ray-casting processes,
 at the cluttered entrance and inside the tunnel, and writes ``benchmarks/results/sim_speed.md``.
 
-    python benchmarks/sim_speed.py [--scans 100] [--resolution 128x1024]
+    python -m benchmarks.sim_speed [--scans 100] [--resolution 128x1024]
 
 Real time is 10 scans/s (the OS1 spins at 10 Hz). The machine's load average is recorded with
 the figures because the benchmark machine may be shared.
@@ -23,11 +23,9 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from lili_odom.sim.generator import SimRequest, Simulation, default_cache_dir, simulate_bag  # noqa: E402
-from lili_odom.sim.sensors import parse_resolution  # noqa: E402
+from benchmarks._common import RESULTS
+from lili_odom.sim.generator import SimRequest, Simulation, default_cache_dir, simulate_bag
+from lili_odom.sim.sensors import parse_resolution
 
 PLACES = {"entrance (outside, t = 0-10 s)": 0.0, "inside the tunnel (t = 80-90 s)": 80.0}
 
@@ -58,7 +56,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scans", type=int, default=100)
     ap.add_argument("--resolution", default="128x1024")
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "sim_speed.md")
+    ap.add_argument("--out", type=Path, default=RESULTS / "sim_speed.md")
     args = ap.parse_args(argv)
     res = parse_resolution(args.resolution)
     rows = []
@@ -74,7 +72,7 @@ def main(argv=None) -> int:
     lines = [
         "# Simulator speed",
         "",
-        f"`python benchmarks/sim_speed.py --scans {args.scans} --resolution {args.resolution}` "
+        f"`python -m benchmarks.sim_speed --scans {args.scans} --resolution {args.resolution}` "
         f"({res[0]} x {res[1]} OS1 scans, {args.scans} scans per cell; real time = 10 scans/s).",
         "",
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; "

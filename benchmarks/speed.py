@@ -1,9 +1,9 @@
-"""Speed of the odometry on full OS1-128 scans (issue #5) into benchmarks/results/speed.{md,json}.
+"""Speed of the odometry on full OS1-128 scans into benchmarks/results/speed.{md,json}.
 
-    python benchmarks/speed.py                        # 300 scans from 90 s and from 5 s of Trial 1
-    python benchmarks/speed.py --scans 30 --start 90 --methods kiss lili
-    python benchmarks/speed.py --set lili.return_ratio=0 --name speed_paper   # other settings
-    python benchmarks/speed.py --previous old/speed.json   # also show an earlier run's figures
+    python -m benchmarks.speed                        # 300 scans from 90 s and from 5 s of Trial 1
+    python -m benchmarks.speed --scans 30 --start 90 --methods kiss lili
+    python -m benchmarks.speed --set lili.return_ratio=0 --name speed_paper   # other settings
+    python -m benchmarks.speed --previous old/speed.json   # also show an earlier run's figures
 
 On the same scans of the simulated tunnel Trial 1 (128 x 1024, seed 0; one piece per window,
 from the simulator cache, generated first if absent, about 30 s each), one after the other, each in its own fresh
@@ -11,8 +11,9 @@ process so that the peak RSS is per method:
 
 * ``kiss``: KISS-ICP alone, ``KissICP.register_frame`` on the parsed points (range 1-100 m,
   our voxel size, deskewing with its constant-velocity model, per-point times in [0, 1]);
-* ``none``, ``zhang``, ``hessian``, ``lili``: our pipeline (``MessageFeeder`` ->
-  ``OdometryPipeline``, exactly as ``lili-odom run`` drives it) with that detector.
+* ``none``, ``zhang``, ``hessian``, ``lili``: our pipeline through the replay loop
+  (:class:`lili_odom.evaluation.replay.Replay`, exactly as ``lili-odom run`` drives it) with
+  that detector; its timing hooks give the stages.
 
 Each window starts ``--start`` seconds into the trial (default: 90 s, a featureless,
 degenerate stretch, and 5 s, the cluttered entrance). IMU and wheel messages from
@@ -36,7 +37,6 @@ import argparse
 import json
 import logging
 import os
-import platform
 import resource
 import subprocess
 import sys
@@ -47,9 +47,9 @@ from typing import Any
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+from benchmarks._common import (RESULTS, ROOT, SET_HELP, apply_set, machine_info, parse_set,
+                                write_results)
+from lili_odom.evaluation.timing import median_run
 
 METHODS = ("kiss", "none", "zhang", "lili")
 ALL_METHODS = ("kiss", "none", "zhang", "hessian", "lili")
@@ -87,30 +87,67 @@ def _tf_static(bag: Path):
     return None
 
 
-def _stage_stats(per_scan: dict[str, list[float]], stages) -> dict[str, dict[str, float] | None]:
-    out: dict[str, dict[str, float] | None] = {}
-    for k in STAGES:
-        v = np.asarray(per_scan.get(k, []), dtype=float) * 1e3
-        if k not in stages or not len(v):
-            out[k] = None
-            continue
-        out[k] = {"mean_ms": float(np.mean(v)), "p95_ms": float(np.percentile(v, 95)),
-                  "max_ms": float(np.max(v))}
-    return out
-
-
 def _rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB on Linux
 
 
-def apply_overrides(config: Any, overrides: dict[str, str]) -> None:
-    """``--set`` overrides through the node's own parameter handling (types, ranges checked)."""
-    from lili_odom.config import apply_overrides as apply
+def _kiss_icp(config: Any, stage_acc: dict[str, float]):
+    """KISS-ICP's own pipeline with our scan matcher settings, its building blocks timed into
+    ``stage_acc`` (deskew, icp, map) [s]."""
+    from kiss_icp.config import KISSConfig
+    from kiss_icp.kiss_icp import KissICP
 
-    try:
-        apply(config, overrides)
-    except ValueError as exc:
-        raise SystemExit(f"speed: {exc}") from None
+    sm = config.pipeline.scan_matcher
+    kc = KISSConfig()
+    kc.data.max_range = sm.max_range
+    kc.data.min_range = sm.min_range
+    kc.data.deskew = True
+    kc.mapping.voxel_size = sm.voxel
+    kc.mapping.max_points_per_voxel = sm.max_points_per_voxel
+    kc.registration.max_num_iterations = sm.max_iterations
+    kc.registration.convergence_criterion = sm.convergence
+    kc.registration.max_num_threads = sm.max_threads
+    kc.adaptive_threshold.initial_threshold = sm.initial_threshold
+    kc.adaptive_threshold.min_motion_th = sm.min_motion_th
+    kiss = KissICP(kc)
+
+    def timed(fn, stage):
+        def wrapper(*a, **kw):
+            t0 = time.perf_counter()
+            try:
+                return fn(*a, **kw)
+            finally:
+                stage_acc[stage] = stage_acc.get(stage, 0.0) + time.perf_counter() - t0
+        return wrapper
+
+    # KissICP.register_frame itself, with its building blocks timed in place
+    kiss.preprocessor.preprocess = timed(kiss.preprocessor.preprocess, "deskew")
+    kiss.voxelize = timed(kiss.voxelize, "deskew")
+    kiss.registration.align_points_to_map = timed(kiss.registration.align_points_to_map, "icp")
+    kiss.adaptive_threshold.update_model_deviation = timed(
+        kiss.adaptive_threshold.update_model_deviation, "map")
+    kiss.local_map.update = timed(kiss.local_map.update, "map")
+    return kiss
+
+
+def _window_items(bag: Path, config: Any, start: float, scans: int):
+    """The bag's messages for one window: ``/tf_static`` first, IMU and wheels from
+    ``gravity_window_s + 0.5`` s before the window (so the estimator initialises as on a
+    robot), clouds from ``start`` s on, at most ``scans`` of them (then the IMU / wheel
+    messages continue)."""
+    topics = [config.lidar_topic, config.imu_topic, config.wheel_topic]
+    tf_msg = _tf_static(bag)
+    with _window_reader(bag, topics, 0.0) as probe:
+        t_bag0 = probe.start_time
+    t_window = t_bag0 + start
+    lead = config.pipeline.fusion.gravity_window_s + 0.5
+    if tf_msg is not None:
+        yield "/tf_static", tf_msg
+    with _window_reader(bag, topics, max(t_bag0, t_window - lead)) as reader:
+        for item in reader:
+            if item.topic == config.lidar_topic and item.stamp < t_window - 1e-6:
+                continue
+            yield item.topic, item.msg
 
 
 def run_method(bag: Path | str, method: str, start: float, scans: int, warmup: int,
@@ -118,166 +155,94 @@ def run_method(bag: Path | str, method: str, start: float, scans: int, warmup: i
                ) -> dict[str, Any]:
     """Run ``method`` over ``scans`` scans from ``start`` s into the bag, in this process.
 
+    Our methods run through the replay loop (:class:`lili_odom.evaluation.replay.Replay`), its
+    timing hooks giving the per-stage times and the time spent in the feeder.
+
     Returns a JSON-ready dict: scans, scans_per_s, stages (mean/p95/max ms or None),
     rss_peak_mb, rss_setup_mb, degenerate_fraction, counters.
     """
     from lili_odom import geometry, messages
     from lili_odom.config import load_config
+    from lili_odom.evaluation.replay import Replay
+    from lili_odom.evaluation.timing import stage_stats
 
     logging.basicConfig(level=logging.ERROR)
     bag = Path(bag)
     config = load_config(None)
     if method != "kiss":
         config.pipeline.method = method
-        apply_overrides(config, overrides or {})
+        apply_set(config, overrides or {}, "speed")
     config.validate()
     sm = config.pipeline.scan_matcher
-    topics = [config.lidar_topic, config.imu_topic, config.wheel_topic]
-
-    parse_fn = messages.default_cloud_parser(sm.min_range, sm.max_range)
-    original_scan_from_msg = messages.scan_from_msg
-    parse_times: dict[float, float] = {}
-
-    def timed_scan_from_msg(msg, parse=None):
-        t0 = time.perf_counter()
-        scan = original_scan_from_msg(msg, parse)
-        parse_times[scan.stamp] = time.perf_counter() - t0
-        return scan
 
     per_scan: dict[str, list[float]] = {k: [] for k in STAGES}
     dims: list[int] = []
     n_out = 0
     timed_s = 0.0  # time spent in the timed region (after the warm-up scans)
+    t_report = time.monotonic()
 
     def record(timings: dict[str, float], dim: int) -> None:
-        nonlocal n_out
+        nonlocal n_out, t_report
         n_out += 1
+        if progress and time.monotonic() - t_report > 10.0:
+            t_report = time.monotonic()
+            print(f"    {method} @ {start:g} s: {n_out}/{scans} scans", file=sys.stderr,
+                  flush=True)
         if n_out <= warmup:
             return
         for k, v in timings.items():
-            per_scan[k].append(v)
+            if k in per_scan:
+                per_scan[k].append(v)
         dims.append(dim)
 
-    tf_msg = _tf_static(bag)
-    with _window_reader(bag, topics, 0.0) as probe:
-        t_bag0 = probe.start_time
-    t_window = t_bag0 + start
-    lead = config.pipeline.fusion.gravity_window_s + 0.5
-    reader = _window_reader(bag, topics, max(t_bag0, t_window - lead))
-
     counters: dict[str, int] = {}
-    if method == "kiss":
-        from kiss_icp.config import KISSConfig
-        from kiss_icp.kiss_icp import KissICP
-
-        kc = KISSConfig()
-        kc.data.max_range = sm.max_range
-        kc.data.min_range = sm.min_range
-        kc.data.deskew = True
-        kc.mapping.voxel_size = sm.voxel
-        kc.mapping.max_points_per_voxel = sm.max_points_per_voxel
-        kc.registration.max_num_iterations = sm.max_iterations
-        kc.registration.convergence_criterion = sm.convergence
-        kc.registration.max_num_threads = sm.max_threads
-        kc.adaptive_threshold.initial_threshold = sm.initial_threshold
-        kc.adaptive_threshold.min_motion_th = sm.min_motion_th
-        kiss = KissICP(kc)
-        stage_acc: dict[str, float] = {}
-
-        def timed(fn, stage):
-            def wrapper(*a, **kw):
-                t0 = time.perf_counter()
-                try:
-                    return fn(*a, **kw)
-                finally:
-                    stage_acc[stage] = stage_acc.get(stage, 0.0) + time.perf_counter() - t0
-            return wrapper
-
-        # KissICP.register_frame itself, with its building blocks timed in place
-        kiss.preprocessor.preprocess = timed(kiss.preprocessor.preprocess, "deskew")
-        kiss.voxelize = timed(kiss.voxelize, "deskew")
-        kiss.registration.align_points_to_map = timed(kiss.registration.align_points_to_map, "icp")
-        kiss.adaptive_threshold.update_model_deviation = timed(
-            kiss.adaptive_threshold.update_model_deviation, "map")
-        kiss.local_map.update = timed(kiss.local_map.update, "map")
-    else:
-        from lili_odom.pipeline.feeder import MessageFeeder
-        from lili_odom.pipeline.odometry import OdometryPipeline
-
-        messages.scan_from_msg = timed_scan_from_msg  # what the feeder calls
-        pipeline = OdometryPipeline(config.pipeline)
-        feeder = MessageFeeder(pipeline, config)
-        process_scan = pipeline.process_scan
-
-        def timed_process_scan(scan):
-            out = process_scan(scan)
-            parse = parse_times.pop(scan.stamp, float("nan"))
-            if out is not None:
-                t = {k: out.timings.get(k, float("nan")) for k in STAGES if k not in ("parse", "total")}
-                t["parse"] = parse
-                t["total"] = parse + out.timings["total"]
-                record(t, out.degeneracy.dimension if out.degeneracy is not None else 0)
-            return out
-
-        pipeline.process_scan = timed_process_scan
-        if tf_msg is not None:
-            feeder.feed("/tf_static", tf_msg)
-
-    rss_setup = _rss_mb()
     fed = 0
-    t_report = time.monotonic()
-    with reader:
-        for item in reader:
-            if item.topic == config.lidar_topic:
-                if item.stamp < t_window - 1e-6:
-                    continue
-                if fed >= scans:
-                    if method == "kiss":
-                        break
-                    continue  # keep feeding IMU/wheels until the last scan has its data
-                fed += 1
-            if method == "kiss":
-                if item.topic != config.lidar_topic:
-                    continue
-                stage_acc.clear()
-                t0 = time.perf_counter()
-                scan = timed_scan_from_msg(item.msg, parse_fn)
-                t1 = time.perf_counter()
-                # the same input guard as the pipeline's (OdometryPipeline.process_scan)
-                pts, t = scan.points, scan.times
-                bad = geometry.nonfinite_rows(pts)
-                if bad is not None:
-                    pts, t = pts[~bad], (None if t is None or len(t) != len(bad) else t[~bad])
-                times = np.zeros(0)
-                if t is not None and len(t) == len(pts):
-                    if len(t) and np.all(np.isfinite(t)) and np.ptp(t) > 0:
-                        times = (t - t.min()) / np.ptp(t)
-                kiss.register_frame(pts, times)
-                t2 = time.perf_counter()
-                record({"parse": t1 - t0, "total": t2 - t0,
-                        **{k: stage_acc.get(k, 0.0) for k in ("deskew", "icp", "map")}}, 0)
-                if n_out > warmup:
-                    timed_s += t2 - t0
-            else:
-                counting = n_out >= warmup
-                t0 = time.perf_counter()
-                feeder.feed(item.topic, item.msg)
-                if counting:
-                    timed_s += time.perf_counter() - t0
-                if fed >= scans and not feeder.pending:
-                    break
-            if progress and time.monotonic() - t_report > 10.0:
-                t_report = time.monotonic()
-                print(f"    {method} @ {start:g} s: {n_out}/{scans} scans", file=sys.stderr,
-                      flush=True)
-        if method != "kiss":
-            counting = n_out >= warmup
+    if method == "kiss":
+        stage_acc: dict[str, float] = {}
+        kiss = _kiss_icp(config, stage_acc)
+        parse_fn = messages.default_cloud_parser(sm.min_range, sm.max_range)
+        rss_setup = _rss_mb()
+        for topic, msg in _window_items(bag, config, start, scans):
+            if topic != config.lidar_topic:
+                continue
+            if fed >= scans:
+                break
+            fed += 1
+            stage_acc.clear()
             t0 = time.perf_counter()
-            feeder.flush()
+            scan = messages.scan_from_msg(msg, parse_fn)
+            t1 = time.perf_counter()
+            # the same input guard as the pipeline's (OdometryPipeline.process_scan)
+            pts, t = scan.points, scan.times
+            bad = geometry.nonfinite_rows(pts)
+            if bad is not None:
+                pts, t = pts[~bad], (None if t is None or len(t) != len(bad) else t[~bad])
+            times = np.zeros(0)
+            if t is not None and len(t) == len(pts):
+                if len(t) and np.all(np.isfinite(t)) and np.ptp(t) > 0:
+                    times = (t - t.min()) / np.ptp(t)
+            kiss.register_frame(pts, times)
+            t2 = time.perf_counter()
+            record({"parse": t1 - t0, "total": t2 - t0,
+                    **{k: stage_acc.get(k, 0.0) for k in ("deskew", "icp", "map")}}, 0)
+            if n_out > warmup:
+                timed_s += t2 - t0
+    else:
+        counting = warmup <= 0  # decided before each feeder call, as the call starts
+
+        def on_call(seconds: float) -> None:
+            nonlocal timed_s, counting
             if counting:
-                timed_s += time.perf_counter() - t0
-            counters = {k: int(v) for k, v in pipeline.counters.items()}
-    messages.scan_from_msg = original_scan_from_msg
+                timed_s += seconds
+            counting = n_out >= warmup
+
+        replay = Replay(config, on_call=on_call,
+                        on_timings=lambda out, t: record(
+                            t, out.degeneracy.dimension if out.degeneracy is not None else 0))
+        rss_setup = _rss_mb()
+        replay.run(_window_items(bag, config, start, scans), max_scans=scans)
+        fed = replay.clouds_in
+        counters = {k: int(v) for k, v in replay.pipeline.counters.items()}
     n = len(per_scan["total"])
     stages = KISS_STAGES if method == "kiss" else STAGES
     return {
@@ -289,7 +254,7 @@ def run_method(bag: Path | str, method: str, start: float, scans: int, warmup: i
         "warmup": warmup,
         "timed_s": timed_s,
         "scans_per_s": n / timed_s if timed_s > 0 else float("nan"),
-        "stages": _stage_stats(per_scan, stages),
+        "stages": stage_stats(per_scan, STAGES, stages),
         "rss_peak_mb": _rss_mb(),
         "rss_setup_mb": rss_setup,
         "degenerate_fraction": float(np.mean(np.asarray(dims) > 0)) if dims else 0.0,
@@ -298,16 +263,6 @@ def run_method(bag: Path | str, method: str, start: float, scans: int, warmup: i
 
 
 # ----------------------------------------------------------------------------- machine
-
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
 
 def _cpu_busy_jiffies() -> tuple[int, int]:
     """(busy, total) jiffies of the whole machine from /proc/stat."""
@@ -325,14 +280,6 @@ def _other_load(busy0: int, children0, wall: float) -> float:
     c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     ours = (c1.ru_utime + c1.ru_stime) - (children0.ru_utime + children0.ru_stime)
     return max(0.0, ((busy1 - busy0) / os.sysconf("SC_CLK_TCK") - ours) / wall)
-
-
-def _git(*args: str) -> str:
-    try:
-        return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True,
-                              timeout=20).stdout.rstrip()
-    except (OSError, subprocess.SubprocessError):
-        return ""
 
 
 def _other_processes(min_cpu: float = 10.0, limit: int = 6) -> list[str]:
@@ -356,12 +303,6 @@ def _other_processes(min_cpu: float = 10.0, limit: int = 6) -> list[str]:
     return [r for _, r in sorted(rows, reverse=True)[:limit]]
 
 
-def machine_info() -> dict[str, Any]:
-    dirty = [line[3:] for line in _git("status", "--porcelain", "--", "lili_odom").splitlines()]
-    return {"cpu": _cpu_model(), "cores": os.cpu_count(), "python": platform.python_version(),
-            "commit": _git("rev-parse", "--short", "HEAD").strip(), "uncommitted_lili_odom": dirty}
-
-
 # ----------------------------------------------------------------------------- driver
 
 def _run_in_fresh_process(bag: Path, method: str, start: float, scans: int, warmup: int,
@@ -369,7 +310,7 @@ def _run_in_fresh_process(bag: Path, method: str, start: float, scans: int, warm
                           ) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="lili_speed_") as tmp:
         out = Path(tmp) / "result.json"
-        cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", str(out), "--bag", str(bag),
+        cmd = [sys.executable, "-m", "benchmarks.speed", "--worker", str(out), "--bag", str(bag),
                "--methods", method, "--start", repr(start), "--scans", str(scans),
                "--warmup", str(warmup)]
         if not progress:
@@ -398,13 +339,6 @@ def _targets(results: dict[str, dict]) -> dict[str, Any]:
             t["lili_time_vs_kiss"] = {"value": ratio, "target": TARGET_KISS_RATIO,
                                       "met": ratio <= TARGET_KISS_RATIO}
     return t
-
-
-def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
-    """The run with the median scans/s (the upper one of an even count), with every run's
-    scans/s in ``repeats_scans_per_s`` (in run order)."""
-    chosen = sorted(runs, key=lambda r: r["scans_per_s"])[len(runs) // 2]
-    return {**chosen, "repeats_scans_per_s": [r["scans_per_s"] for r in runs]}
 
 
 def benchmark(bag: Path | str | dict, methods=METHODS, starts=(90.0, 5.0), scans: int = 300,
@@ -446,7 +380,7 @@ def benchmark(bag: Path | str | dict, methods=METHODS, starts=(90.0, 5.0), scans
                           f"{tot['mean_ms']:.1f} ms (p95 {tot['p95_ms']:.1f})"
                           + (f", detector {det['mean_ms']:.1f} ms" if det else "")
                           + f", peak RSS {r['rss_peak_mb']:.0f} MB", flush=True)
-        res = {m: _median_run(rs) for m, rs in runs.items()}
+        res = {m: median_run(rs) for m, rs in runs.items()}
         kiss = res.get("kiss")
         for m, r in res.items():
             r["time_vs_kiss"] = (kiss["scans_per_s"] / r["scans_per_s"]) if kiss else None
@@ -602,14 +536,13 @@ def main(argv=None) -> int:
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=ALL_METHODS)
     ap.add_argument("--bag", type=Path, help="bag to use (default: the cached Trial 1 bag)")
     ap.add_argument("--resolution", default="128x1024", help="of the Trial 1 bag")
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results",
+    ap.add_argument("--out", type=Path, default=RESULTS,
                     help="directory for the results (default benchmarks/results)")
     ap.add_argument("--name", default="speed",
                     help="file name of the results without .md/.json (default speed)")
     ap.add_argument("--no-progress", action="store_true")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="pipeline parameter for our methods instead of its default (dotted "
-                    "below pipeline, e.g. lili.return_ratio=0.1; repeatable)")
+                    help=f"our methods only: {SET_HELP}")
     ap.add_argument("--repeats", type=int, default=1,
                     help="rounds of every method per window; each method is reported by its "
                     "run with the median scans/s (default 1)")
@@ -621,10 +554,7 @@ def main(argv=None) -> int:
         ap.error("--scans must exceed --warmup")
     if args.repeats < 1:
         ap.error("--repeats must be at least 1")
-    try:
-        overrides = dict(item.split("=", 1) for item in args.set)
-    except ValueError:
-        ap.error("--set takes KEY=VALUE")
+    overrides = parse_set(args.set, "speed")
     if args.worker is not None:  # one method in this (fresh) process
         r = run_method(args.bag, args.methods[0], args.start[0], args.scans, args.warmup,
                        progress=not args.no_progress, overrides=overrides)
@@ -651,15 +581,13 @@ def main(argv=None) -> int:
                        repeats=args.repeats)
     if previous is not None:
         report["previous"] = previous
-    command = (f"python benchmarks/speed.py --scans {args.scans} --start "
+    command = (f"python -m benchmarks.speed --scans {args.scans} --start "
                f"{' '.join(f'{s:g}' for s in args.start)} --warmup {args.warmup} "
                f"--methods {' '.join(args.methods)}"
                + "".join(f" --set {k}={v}" for k, v in overrides.items())
                + (f" --repeats {args.repeats}" if args.repeats > 1 else "")
                + (f" --name {args.name}" if args.name != "speed" else ""))
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / f"{args.name}.json").write_text(json.dumps(report, indent=1) + "\n")
-    (args.out / f"{args.name}.md").write_text(markdown(report, command))
+    write_results(args.out, args.name, markdown(report, command), report)
     print(f"wrote {args.out / (args.name + '.md')}")
     return 0
 

@@ -16,7 +16,7 @@ Procedure (the value found is frozen as ``lili_odom.degeneracy.hessian.HESSIAN_T
 
 Noisy cases are reported for information only and take no part in the tuning.
 
-Usage: ``python benchmarks/tune_hessian.py [--seeds 0 1 2] [--json OUT]``.
+Usage: ``python -m benchmarks.tune_hessian [--seeds 0 1 2] [--json OUT]``.
 """
 from __future__ import annotations
 

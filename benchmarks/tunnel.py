@@ -1,7 +1,7 @@
 """Tunnel evaluation (the paper's Table II) into benchmarks/results/tunnel.{md,json,png}.
 
-    python benchmarks/tunnel.py                      # Trials 1 and 2, full 128x1024, all methods
-    python benchmarks/tunnel.py --resolution 64x512 --jobs 2
+    python -m benchmarks.tunnel                      # Trials 1 and 2, full 128x1024, all methods
+    python -m benchmarks.tunnel --resolution 64x512 --jobs 2
 
 Bags are generated once into the simulator cache (data/sim or $LILI_ODOM_SIM_CACHE); per-run
 outputs go to data/tunnel_runs. Any option of ``lili-odom evaluate`` is accepted.
@@ -9,16 +9,14 @@ outputs go to data/tunnel_runs. Any option of ``lili-odom evaluate`` is accepted
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
+from benchmarks._common import RESULTS, ROOT
 from lili_odom.cli import main
-
-ROOT = Path(__file__).resolve().parents[1]
 
 if __name__ == "__main__":
     args = sys.argv[1:]
     if "--out" not in args:
-        args += ["--out", str(ROOT / "benchmarks" / "results")]
+        args += ["--out", str(RESULTS)]
     if "--work-dir" not in args:
         args += ["--work-dir", str(ROOT / "data" / "tunnel_runs")]
     sys.exit(main(["evaluate", *args]))

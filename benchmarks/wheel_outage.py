@@ -1,14 +1,14 @@
-"""Wheel outage over several tunnel windows, seeds and repeats, per configuration (issue #6).
+"""Wheel outage over several tunnel windows, seeds and repeats, per configuration.
 
-    python benchmarks/wheel_outage.py                       # ~10 min on 2 cores
-    python benchmarks/wheel_outage.py --configs default benchmarks/configs/marginalized_wheels.yaml \\
+    python -m benchmarks.wheel_outage                       # ~10 min on 2 cores
+    python -m benchmarks.wheel_outage --configs default benchmarks/configs/marginalized_wheels.yaml \\
         --seeds 0 1 2 --starts 70 150 --repeats 2
-    python benchmarks/wheel_outage.py --threads 1 --repeats 2   # bit-identical repeats
+    python -m benchmarks.wheel_outage --threads 1 --repeats 2   # bit-identical repeats
 
 Inside a detected degenerate subspace the wheels carry the motion; when they stop, the
 subspace rests on the IMU alone and its error grows with the square of the outage length
 (an effective accelerometer bias of 0.01 m/s^2, bias and tilt error together, is 2 m after
-20 s). ``benchmarks/faults.py`` measures one such outage on one window. One window says little:
+20 s). ``benchmarks.faults`` measures one such outage on one window. One window says little:
 this runs the outage (the last ``--outage`` seconds of each ``--duration`` s piece, wheel
 messages dropped by :class:`lili_odom.evaluation.faults.FaultInjector`) on pieces of Trial
 ``--trial`` starting at each of ``--starts`` [s], for each simulator seed, configuration and
@@ -35,19 +35,11 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from faults import worker_fault_run  # noqa: E402
-from lili_odom.sim.generator import ensure_trial_bag  # noqa: E402
-
-RESULTS = ROOT / "benchmarks" / "results"
-
-
-def _label(config: str) -> str:
-    return "default" if config == "default" else Path(config).stem
+from benchmarks._common import RESULTS, ROOT, SIM_CACHE
+from benchmarks.faults import worker_fault_run
+from lili_odom.evaluation.comparison import matching_runs, paired_table
+from lili_odom.evaluation.comparison import run_label as _label
+from lili_odom.sim.generator import ensure_trial_bag
 
 
 def _run(job: dict) -> dict:
@@ -89,35 +81,6 @@ def _per_window(rows: list[dict], configs: list[str]) -> list[str]:
                            == (seed, start, config)), key=lambda r: r["repeat"])
             cells.append(", ".join(f"{r['ate_m']:.2f} / {r['final_m']:.2f}" for r in mine))
         lines.append(f"| {seed} | {start:g} | " + " | ".join(cells) + " |")
-    return lines
-
-
-def _paired(rows: list[dict], configs: list[str]) -> list[str]:
-    """Each configuration after the first against the first, window by window (final error
-    averaged over repeats): mean difference, windows where the first ends further off, and
-    the Wilcoxon signed-rank test's p-value (scipy) of the paired differences."""
-    from scipy.stats import wilcoxon
-
-    def finals(config: str) -> dict[tuple, float]:
-        out: dict[tuple, list[float]] = {}
-        for r in rows:
-            if r["config"] == config:
-                out.setdefault((r["seed"], r["start"]), []).append(r["final_m"])
-        return {w: statistics.mean(v) for w, v in out.items()}
-
-    labels = list(map(_label, configs))
-    base = finals(labels[0])
-    lines = [f"| against `{labels[0]}` | windows | mean difference [m] | `{labels[0]}` further "
-             "off in | Wilcoxon p |", "|---|---|---|---|---|"]
-    for config in labels[1:]:
-        other = finals(config)
-        common = sorted(set(base) & set(other))
-        diff = [base[w] - other[w] for w in common]
-        if not diff:
-            continue
-        p = float(wilcoxon(diff).pvalue) if any(diff) and len(diff) > 1 else float("nan")
-        lines.append(f"| `{config}` | {len(diff)} | {statistics.mean(diff):+.2f} | "
-                     f"{sum(d > 0 for d in diff)} of {len(diff)} | {p:.2f} |")
     return lines
 
 
@@ -182,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
     bags = {}
     for seed in args.seeds:  # one at a time: each generation uses every core
         for start in args.starts:
-            bag = ensure_trial_bag(args.trial, ROOT / "data" / "sim", resolution=args.resolution,
+            bag = ensure_trial_bag(args.trial, SIM_CACHE, resolution=args.resolution,
                                    seed=seed, start=start, duration=args.duration,
                                    progress=False)
             bags[seed, start] = os.path.relpath(bag, ROOT)  # no machine paths in the results
@@ -205,12 +168,11 @@ def _reused_rows(args: argparse.Namespace) -> list[dict]:
         raise SystemExit(f"--reuse: cannot read {path}: {exc}") from None
     wanted = {(s, float(t), _label(c), r) for s in args.seeds for t in args.starts
               for c in args.configs for r in range(args.repeats)}
-    rows = [r for r in stored.get("runs", [])
-            if (r["seed"], float(r["start"]), r["config"], r["repeat"]) in wanted]
-    same = all(stored.get(k) == v for k, v in (
-        ("trial", args.trial), ("resolution", args.resolution), ("duration_s", args.duration),
-        ("outage_s", args.outage), ("threads", args.threads)))
-    if not same or len(rows) != len(wanted):
+    rows = matching_runs(stored, {"trial": args.trial, "resolution": args.resolution,
+                                  "duration_s": args.duration, "outage_s": args.outage,
+                                  "threads": args.threads},
+                         wanted, ("seed", "start", "config", "repeat"))
+    if rows is None:
         raise SystemExit(f"--reuse: {path} holds other runs than these arguments ask for")
     return rows
 
@@ -223,7 +185,7 @@ def _report(args: argparse.Namespace, rows: list[dict]) -> int:
          "outage_s": args.outage, "threads": args.threads, "runs": rows}, indent=1) + "\n")
     _plot(rows, args.configs, args.out / "wheel_outage.png")
     starts = " ".join(f"{t:g}" for t in args.starts)
-    command = (f"python benchmarks/wheel_outage.py --trial {args.trial} --seeds "
+    command = (f"python -m benchmarks.wheel_outage --trial {args.trial} --seeds "
                f"{' '.join(map(str, args.seeds))} --starts {starts}"
                f" --duration {args.duration:g} --outage {args.outage:g} --configs "
                f"{' '.join(args.configs)} --repeats {args.repeats} --threads {args.threads} "
@@ -245,7 +207,7 @@ def _report(args: argparse.Namespace, rows: list[dict]) -> int:
              "Positive: the first configuration ends further off. A window's final error "
              "(averaged over its repeats) is one draw of a quantity that spreads over metres "
              "(the outage integrates the IMU's noise), so read the p-value, not the means.", "",
-             *_paired(rows, args.configs), "",
+             *paired_table(rows, [_label(c) for c in args.configs]), "",
              "![final error per run](wheel_outage.png)", ""]
     (args.out / "wheel_outage.md").write_text("\n".join(lines))
     print("\n".join(lines))

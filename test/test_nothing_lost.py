@@ -3,7 +3,7 @@
 * At 1x with the real pipeline (method ``none``) every scan of the CI bag gives exactly one
   odometry message and nothing is dropped. The node's queue and the cloud subscription hold
   the whole bag (a lossless replay), so this holds however loaded the machine is; the rate
-  the default queue sustains is measured by ``benchmarks/faults.py --play-rates``.
+  the default queue sustains is measured by ``python -m benchmarks.faults --play-rates``.
 * At 8x with a pipeline slower than the scans (a fake taking 0.2 s per scan) the node drops
   scans, but explicitly: every published scan is an odometry message, a counted drop
   (``scans_dropped``) or a counted scan without output (``scans_no_output``), and the drops

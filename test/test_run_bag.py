@@ -40,10 +40,10 @@ def test_run_missing_bag_is_a_one_line_error(tmp_path, capsys):
 @pytest.mark.skipif(not BAG.is_dir(), reason="CI bag missing")
 def test_scans_csv_and_tilt_diagnostics_show_the_bias_taken_for_a_tilt(tmp_path):
     """scans.csv carries the registration's orientation and the estimated biases, and
-    ``arc_diagnostics.py tilt`` finds what the start's gravity alignment does with an
+    ``run_diagnostics.tilt_series`` finds what the start's gravity alignment does with an
     accelerometer bias b at rest: it reads as a tilt of b / g (x error b_y / g, y error
     -b_x / g, IMU axes = base_link axes here)."""
-    import importlib.util
+    from lili_odom.evaluation.run_diagnostics import tilt_series, tilt_table
 
     out = tmp_path / "run"
     assert main(["run", str(BAG), "--method", "none", "--out", str(out), "--no-progress",
@@ -53,15 +53,10 @@ def test_scans_csv_and_tilt_diagnostics_show_the_bias_taken_for_a_tilt(tmp_path)
     np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-6)
     for name in ("accel_bias_x", "accel_bias_y", "accel_bias_z", "gyro_bias_x", "gravity_tilt_x"):
         assert np.isfinite(scans[name]).all(), name
-    root = Path(__file__).resolve().parents[1]
-    spec = importlib.util.spec_from_file_location("arc_diagnostics",
-                                                  root / "benchmarks" / "arc_diagnostics.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    d = module.tilt_series(out, trial=3, seed=0)  # how the bag was made (bags/README.md)
+    d = tilt_series(out, trial=3, seed=0)  # how the bag was made (bags/README.md)
     b = d["true_bias"][0]
     expected = np.degrees([b[1], -b[0]]) / 9.80665
     assert np.abs(expected).max() > 0.2  # the seed's bias is large enough to be seen
     np.testing.assert_allclose(d["fused"][0, :2], expected, atol=0.1)
-    lines = module.tilt(out, 1.0, 3, 0)
+    lines = tilt_table(out, 1.0, 3, 0)
     assert sum(line.startswith("| ") for line in lines) >= 3

@@ -207,7 +207,7 @@ def _markdown(report: dict) -> str:
         + (f", from {report['start']:g} s" if report.get("start") else "")
         + (f", {report['duration']:g} s of each trial" if report.get("duration") else "")
         + ". "
-        f"Produced by `{report['command']}` (`benchmarks/tunnel.py` runs the default set).",
+        f"Produced by `{report['command']}` (`python -m benchmarks.tunnel` runs the default set).",
         "",
         "ATE: translation RMSE after SE(3) alignment. RPE: RMSE of the relative position error "
         "over path segments of the stated length. Both via `evo`. "

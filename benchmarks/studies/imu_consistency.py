@@ -1,8 +1,8 @@
 """Does the fused IMU state agree with the fused poses and with the simulator's truth?
 
-    python benchmarks/imu_consistency.py                      # Trial 1, 64x512, first 200 s
-    python benchmarks/imu_consistency.py --set fusion.lidar.factor=prior
-    python benchmarks/imu_consistency.py --trial 2 --duration 240 --set fusion.lidar.factor=hybrid \
+    python -m benchmarks.studies.imu_consistency                      # Trial 1, 64x512, first 200 s
+    python -m benchmarks.studies.imu_consistency --set fusion.lidar.factor=prior
+    python -m benchmarks.studies.imu_consistency --trial 2 --duration 240 --set fusion.lidar.factor=hybrid \
         --set remap_iterations=10 --name imu_consistency_t2_hybrid
 
 Runs the odometry (``lili`` unless ``--method``) over simulated Trial 1 and samples, every
@@ -12,8 +12,8 @@ the estimated accelerometer bias against the simulator's true bias (os_imu axes 
 simulator regenerates its IMU noise from the seed, so the truth is exact), and the online
 wheel distance scale (``fusion.wheel_scale``) against the simulator's (from the bag's sidecar). In a consistent
 estimate the two velocities agree to within noise and the bias converges towards the truth;
-a persistent difference means the IMU factor is being overruled, which is where the fusion's
-along-axis drift in the tunnel is being investigated (README, Status).
+a persistent difference means the IMU factor is being overruled, (docs/design/fusion.md,
+known modelling gaps).
 Writes ``benchmarks/results/imu_consistency.{md,json}`` (``--name`` changes the file name).
 """
 from __future__ import annotations
@@ -26,16 +26,12 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-
-from lili_odom.bagio.reader import BagReader  # noqa: E402
-from lili_odom.config import NodeConfig, apply_overrides  # noqa: E402
-from lili_odom.pipeline.feeder import MessageFeeder  # noqa: E402
-from lili_odom.pipeline.odometry import OdometryPipeline  # noqa: E402
-from lili_odom.sim.generator import SimRequest, Simulation, ensure_trial_bag  # noqa: E402
-from lili_odom.sim.imu import simulate_imu  # noqa: E402
+from benchmarks._common import RESULTS, SET_HELP, SIM_CACHE, apply_set, parse_set
+from lili_odom.bagio.reader import BagReader
+from lili_odom.config import NodeConfig
+from lili_odom.evaluation.replay import Replay
+from lili_odom.sim.generator import SimRequest, Simulation, ensure_trial_bag
+from lili_odom.sim.imu import simulate_imu
 
 
 def true_accel_bias(resolution: tuple[int, int], seed: int, trial: int = 1
@@ -54,26 +50,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--trial", type=int, default=1, choices=[1, 2])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--method", default="lili", choices=["none", "zhang", "hessian", "lili"])
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="pipeline parameter (dotted below pipeline); repeatable")
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=SET_HELP)
+    ap.add_argument("--out", type=Path, default=RESULTS)
     ap.add_argument("--name", default="imu_consistency")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
 
     rows, cols = (int(v) for v in args.resolution.lower().split("x"))
-    bag = ensure_trial_bag(args.trial, ROOT / "data" / "sim", resolution=(rows, cols), seed=args.seed,
+    bag = ensure_trial_bag(args.trial, SIM_CACHE, resolution=(rows, cols), seed=args.seed,
                            progress=not args.no_progress)
     cfg = NodeConfig()
     overrides = {"method": args.method}
-    overrides.update(kv.split("=", 1) if "=" in kv else (kv, "") for kv in args.set)
-    try:
-        apply_overrides(cfg, overrides)
-    except ValueError as exc:
-        print(f"imu_consistency: {exc}", file=sys.stderr)
-        return 2
-    pipe = OdometryPipeline(cfg.pipeline)
-    feeder = MessageFeeder(pipe, cfg)
+    overrides.update(parse_set(args.set, "imu_consistency"))
+    apply_set(cfg, overrides, "imu_consistency")
 
     samples: list[tuple[float, np.ndarray, np.ndarray]] = []  # (stamp, pose, fused velocity)
     biases: list[np.ndarray] = []
@@ -81,19 +70,26 @@ def main(argv: list[str] | None = None) -> int:
     topics = [cfg.lidar_topic, cfg.imu_topic, cfg.wheel_topic, "/tf_static"]
     t_bag0 = None
     bar = tqdm(total=args.duration, unit="s", disable=args.no_progress, desc="odometry")
-    with BagReader(bag, topics=topics, required=[cfg.lidar_topic]) as reader:
-        for item in reader:
+
+    def on_output(out, pipe) -> None:
+        fused = pipe.estimator.last_output
+        if fused is None:
+            return
+        samples.append((out.stamp, out.pose, fused.velocity.copy()))
+        biases.append(fused.accel_bias.copy())
+        scales.append(float(out.details.get("wheel_scale", float("nan"))))
+        bar.update(max(0.0, out.stamp - t_bag0 - bar.n))
+
+    def first_seconds(items):
+        nonlocal t_bag0
+        for item in items:
             t_bag0 = item.stamp if t_bag0 is None else t_bag0
             if item.stamp - t_bag0 > args.duration:
-                break
-            for out in feeder.feed(item.topic, item.msg):
-                fused = pipe.estimator.last_output
-                if fused is None:
-                    continue
-                samples.append((out.stamp, out.pose, fused.velocity.copy()))
-                biases.append(fused.accel_bias.copy())
-                scales.append(float(out.details.get("wheel_scale", float("nan"))))
-                bar.update(max(0.0, out.stamp - t_bag0 - bar.n))
+                return
+            yield item
+
+    with BagReader(bag, topics=topics, required=[cfg.lidar_topic]) as reader:
+        Replay(cfg, on_output=on_output).run(first_seconds(reader), flush=False)
     bar.close()
     if len(samples) < 20:
         print("imu_consistency: fewer than 20 fused scans; nothing to report", file=sys.stderr)
@@ -122,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
                       "accel_bias_true": b_true[i].tolist(), "wheel_scale": scales[k]})
 
     args.out.mkdir(parents=True, exist_ok=True)
-    command = "python benchmarks/imu_consistency.py" + "".join(
+    command = "python -m benchmarks.studies.imu_consistency" + "".join(
         f" {a}" for a in (argv if argv is not None else sys.argv[1:]))
     lines = [
         "# Fused IMU state against the fused poses and the simulator's truth", "",

@@ -1,6 +1,6 @@
 """Odometry started while the robot drives through the featureless tunnel, per LiDAR factor.
 
-    python benchmarks/start_while_moving.py     # 3 windows x 4 settings, ~6 min on 2 cores
+    python -m benchmarks.studies.start_while_moving     # 3 windows x 4 settings, ~6 min on 2 cores
 
 ``test/test_degenerate_odometry.py`` checks one such start (Trial 1 at 100 s, 8 s, 32 x 256).
 Its scenario is sensitive to detector misses in the first scans after a start while moving.
@@ -20,13 +20,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-
-from lili_odom.config import NodeConfig, apply_overrides  # noqa: E402
-from lili_odom.evaluation.runner import run_bag  # noqa: E402
-from lili_odom.sim.generator import ensure_trial_bag  # noqa: E402
+from benchmarks._common import RESULTS, SIM_CACHE, config_with
+from lili_odom.evaluation.runner import run_bag
+from lili_odom.sim.generator import ensure_trial_bag
 
 HYBRID = {"remap_iterations": 10, "fusion.lidar.factor": "hybrid", "fusion.lidar.anchor_sigma": 0.0}
 HOLD = {"detection_schedule.hold_distance_m": 1.0}
@@ -43,8 +39,7 @@ WINDOWS = ((100.0, 8.0), (60.0, 30.0), (230.0, 30.0))
 
 
 def run_window(bag: Path, overrides: dict[str, object]) -> dict:
-    config = NodeConfig()
-    apply_overrides(config, overrides)
+    config = config_with(overrides, prog="start_while_moving")
     with tempfile.TemporaryDirectory() as tmp:
         summary = run_bag(bag, config, Path(tmp), rpe_segment=5.0, progress=False).summary
     return {"ate_m": summary["metrics"]["ate_rmse_m"], "scans": summary["scans_processed"],
@@ -54,11 +49,11 @@ def run_window(bag: Path, overrides: dict[str, object]) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--resolution", default="32x256")
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
+    ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     rows = []
     for start, duration in WINDOWS:
-        bag = ensure_trial_bag(1, ROOT / "data" / "sim", resolution=args.resolution, start=start,
+        bag = ensure_trial_bag(1, SIM_CACHE, resolution=args.resolution, start=start,
                                duration=duration, progress=False)
         for name, overrides in SETTINGS.items():
             r = {"start_s": start, "duration_s": duration, "setting": name,
@@ -68,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "start_while_moving.json").write_text(json.dumps(rows, indent=1) + "\n")
     lines = ["# Odometry started while moving (featureless tunnel)", "",
-             f"`python benchmarks/start_while_moving.py` (Trial 1, OS1 at {args.resolution}, "
+             f"`python -m benchmarks.studies.start_while_moving` (Trial 1, OS1 at {args.resolution}, "
              "seed 0, `lili`). Each cell: ATE [m] (evo, SE(3)-aligned translation RMSE) and, in "
              "brackets, the share of scans flagged degenerate.", "",
              "| window | " + " | ".join(SETTINGS) + " |", "|---|" + "---|" * len(SETTINGS)]

@@ -1,14 +1,14 @@
 """How should the scan-to-map registration enter the factor graph? Trial 1, one run per variant.
 
-    python benchmarks/lidar_factor.py                       # every variant, 2 at a time
-    python benchmarks/lidar_factor.py --variants between hybrid --reuse
+    python -m benchmarks.studies.lidar_factor                       # every variant, 2 at a time
+    python -m benchmarks.studies.lidar_factor --variants between hybrid --reuse
 
 Runs ``lili`` over simulated Trial 1 (64 x 512 unless ``--resolution``) once per variant of
 the LiDAR factor (``fusion.lidar.factor``: between / prior / hybrid, with and without the
 degenerate anchor) and of solution remapping (``remap_iterations``), and writes
 ``benchmarks/results/lidar_factor.md`` (+ ``.json``): ATE / RPE(100 m) / final error via the
 runs' own ``metrics.json`` (evo), and the error by component in the true body frame at a few
-times (``arc_diagnostics.errors``), which tells an along-axis (wheel / IMU velocity) error from
+times (``lili_odom.evaluation.run_diagnostics``), which tells an along-axis (wheel / IMU velocity) error from
 a lateral / yaw (LiDAR) failure. Runs live in ``data/lidar_factor_runs/<variant>``;
 ``--reuse`` keeps those that already have a ``metrics.json``.
 """
@@ -23,14 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-for p in (ROOT, ROOT / "benchmarks"):
-    if str(p) not in sys.path:
-        sys.path.insert(0, str(p))
-
-from arc_diagnostics import errors_in_true_body_frame  # noqa: E402
-from lili_odom import geometry  # noqa: E402
-from lili_odom.sim.generator import ensure_trial_bag  # noqa: E402
+from benchmarks._common import RESULTS, ROOT, SIM_CACHE
+from lili_odom.evaluation.run_diagnostics import errors_in_true_body_frame
+from lili_odom import geometry
+from lili_odom.sim.generator import ensure_trial_bag
 
 #: the parameters every variant sets (so that a variant does not depend on the defaults)
 _NEUTRAL: dict[str, object] = {"fusion.lidar.factor": "between", "fusion.lidar.anchor_sigma": 0.0,
@@ -114,7 +110,7 @@ def summarise(name: str, run_dir: Path) -> dict:
 def markdown(rows: list[dict], resolution: str) -> str:
     out = ["# LiDAR factor variants on Trial 1", "",
            f"`lili` on simulated Trial 1 (OS1 at {resolution}, seed 0), one run per variant, "
-           "made by `python benchmarks/lidar_factor.py` (two runs at a time on 2 cores). "
+           "made by `python -m benchmarks.studies.lidar_factor` (two runs at a time on 2 cores). "
            "ATE / RPE(100 m) / final error from each run's `metrics.json` (evo). Error samples: "
            "estimate against truth started at the same pose, no alignment, in the true body "
            "frame (along = tunnel axis).", "",
@@ -140,10 +136,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--reuse", action="store_true", help="keep runs that have metrics.json")
     ap.add_argument("--work-dir", type=Path, default=ROOT / "data" / "lidar_factor_runs")
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
+    ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     rows_, cols = (int(v) for v in args.resolution.lower().split("x"))
-    bag = ensure_trial_bag(1, ROOT / "data" / "sim", resolution=(rows_, cols), seed=0)
+    bag = ensure_trial_bag(1, SIM_CACHE, resolution=(rows_, cols), seed=0)
     with ThreadPoolExecutor(max(1, args.jobs)) as pool:
         dirs = list(pool.map(lambda n: run_variant(bag, n, args.work_dir / n, args.reuse),
                              args.variants))

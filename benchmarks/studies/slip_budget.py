@@ -1,7 +1,7 @@
 """How much of a tunnel run's along-axis error comes from wheel slip?
 
-    python benchmarks/slip_budget.py data/hybrid_factor_runs/trial1_64x512_seed0/lili --trial 1
-    python benchmarks/slip_budget.py RUN_DIR --trial 2 --name slip_budget_t2
+    python -m benchmarks.studies.slip_budget data/hybrid_factor_runs/trial1_64x512_seed0/lili --trial 1
+    python -m benchmarks.studies.slip_budget RUN_DIR --trial 2 --name slip_budget_t2
 
 The simulator's Husky odometry over-reads its speed by 10-35 % during slip events (Poisson, one
 per 40 s on average, 0.3-1.5 s each; ``lili_odom.sim.wheels``). Where the scan matching is
@@ -13,7 +13,7 @@ and, for a ``lili-odom run`` / ``evaluate`` run directory (``estimate.tum``, ``t
 ``scans.csv``), tabulates per event: the over-read distance, the share of the run's scans in
 the event that were flagged degenerate, and the change of the along-axis error across the
 event (error in the true base_link frame, both trajectories started at the same pose, no
-alignment; ``arc_diagnostics.errors_in_true_body_frame``). The change over an event divided by its
+alignment; ``lili_odom.evaluation.run_diagnostics.errors_in_true_body_frame``). The change over an event divided by its
 over-read is the share of the slip that reached the estimate ("leak").
 
 It also splits the along-axis error's variation between the slip events and the rest of the
@@ -32,11 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+from benchmarks._common import RESULTS
 
-from benchmarks.arc_diagnostics import errors_in_true_body_frame  # noqa: E402
+from lili_odom.evaluation.run_diagnostics import errors_in_true_body_frame
 
 SETTLE_S = 0.5  # the error is read this long after an event ends (the fusion lags the wheels)
 
@@ -127,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--trial", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--name", default="slip_budget")
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
+    ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     for f in ("estimate.tum", "truth.tum", "scans.csv"):
         if not (args.run_dir / f).is_file():
@@ -141,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
         {k: v for k, v in r.items() if k not in ("t", "along")}, indent=1) + "\n")
     run_name = "/".join(args.run_dir.resolve().parts[-3:])
     lines = [f"# Along-axis error and wheel slip: `{run_name}`", "",
-             f"`python benchmarks/slip_budget.py RUN --trial {args.trial} --seed {args.seed}` "
+             f"`python -m benchmarks.studies.slip_budget RUN --trial {args.trial} --seed {args.seed}` "
              "(see its docstring). Over-read: wheel distance beyond the truth times the run's "
              f"scale ({r['wheel_scale_truth']:.4f}) during the event; change: along-axis "
              f"error {SETTLE_S} s after the event minus just before it (positive = estimate "

@@ -1,7 +1,7 @@
 """How far the fused motion along a degenerate axis strays from the wheels, per LiDAR factor setup.
 
-    python benchmarks/along_axis_jitter.py                       # Trial 1 seed 2, 140-175 s
-    python benchmarks/along_axis_jitter.py --seed 0 --start 100 --duration 40
+    python -m benchmarks.studies.along_axis_jitter                       # Trial 1 seed 2, 140-175 s
+    python -m benchmarks.studies.along_axis_jitter --seed 0 --start 100 --duration 40
 
 Inside a detected degenerate subspace the wheels (scale-calibrated) are the only sensor meant
 to decide the motion along it. This runs ``lili`` on a window of a simulated trial once per
@@ -32,11 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+from benchmarks._common import RESULTS, config_with
 
-RESULTS = ROOT / "benchmarks" / "results"
 
 #: The settings compared by default (overrides below ``pipeline.``).
 DEFAULT_SETTINGS = {
@@ -59,42 +56,33 @@ def run_window(job: tuple) -> dict:
     """Run one setting over the window; returns per-scan along-axis increments."""
     bag, start, duration, overrides = job
     from lili_odom.bagio.reader import BagReader
-    from lili_odom.config import apply_overrides, load_config
-    from lili_odom.messages import odometry_pose_from_msg
-    from lili_odom.pipeline.feeder import MessageFeeder
-    from lili_odom.pipeline.odometry import OdometryPipeline
+    from lili_odom.evaluation.replay import Replay
 
-    config = apply_overrides(load_config(None), overrides)
-    pipeline = OdometryPipeline(config.pipeline)
-    feeder = MessageFeeder(pipeline, config)
+    config = config_with(overrides, prog="along_axis_jitter")
     topics = [config.lidar_topic, config.imu_topic, config.wheel_topic,
               config.ground_truth_topic, "/tf_static"]
     outs: list[tuple[float, np.ndarray, int, float]] = []
-    truth: list[tuple[float, np.ndarray]] = []
     wheel: list[tuple[float, float]] = []
-    t0 = None
 
-    def record(out) -> None:
+    def record(out, _pipeline) -> None:
         dim = out.degeneracy.dimension if out.degeneracy is not None else 0
         outs.append((out.stamp, out.pose, dim, float(out.details.get("wheel_scale", 1.0))))
 
-    with BagReader(bag, topics=topics, required=[config.lidar_topic]) as reader:
-        for item in reader:
+    def window(items):
+        t0 = None
+        for item in items:
             t0 = item.stamp if t0 is None else t0
             if item.stamp - t0 < start:
                 continue
             if item.stamp - t0 > start + duration:
-                break
-            if item.topic == config.ground_truth_topic:
-                truth.append(odometry_pose_from_msg(item.msg))
-                continue
+                return
             if item.topic == config.wheel_topic:
                 wheel.append((item.stamp, float(item.msg.twist.twist.linear.x)))
-            for out in feeder.feed(item.topic, item.msg):
-                record(out)
-        for out in feeder.flush():
-            record(out)
-    return along_increments(outs, truth, np.asarray(wheel))
+            yield item
+
+    with BagReader(bag, topics=topics, required=[config.lidar_topic]) as reader:
+        replay = Replay(config, on_output=record).run(window(reader))
+    return along_increments(outs, replay.truth, np.asarray(wheel))
 
 
 def along_increments(outs, truth, wheel: np.ndarray) -> dict:
@@ -141,7 +129,7 @@ def render(data: dict) -> str:
     a = data["args"]
     L = ["# Along-axis motion against the wheels",
          "",
-         f"`python benchmarks/along_axis_jitter.py --trial {a['trial']} --seed {a['seed']} "
+         f"`python -m benchmarks.studies.along_axis_jitter --trial {a['trial']} --seed {a['seed']} "
          f"--resolution {a['resolution']} --start {a['start']:g} --duration {a['duration']:g}`: "
          "`lili` on that window, once per setting; per degenerate scan, the fused forward "
          "increment minus the calibrated wheel increment (see the script's docstring). The "

@@ -4,7 +4,7 @@ A Husky-like robot drives a circle (1 m/s, 0.2 rad/s) for N scans at 10 Hz with 
 (noisy), noisy wheel increments and noisy LiDAR poses, degenerate along base_link x half of
 the time. Prints time per update and resident memory at intervals; both must stay flat.
 
-    python benchmarks/fusion_bounded.py [--updates 3000] [--reset-every 100]
+    python -m benchmarks.studies.fusion_bounded [--updates 3000] [--reset-every 100]
 """
 from __future__ import annotations
 
