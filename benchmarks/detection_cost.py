@@ -19,7 +19,6 @@ reference row holds, in those columns, the detector's own scan-to-scan spread. W
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import os
 import sys
@@ -29,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks._common import RESULTS, apply_set, parse_set
+from benchmarks._common import RESULTS, apply_set, parse_set, write_results
 from lili_odom.config import load_config
 from lili_odom.evaluation.runner import run_bag
 from lili_odom.sim.generator import ensure_trial_bag
@@ -195,9 +194,7 @@ def main(argv=None) -> int:
                 row["vs_reference"] = compare(ref, run)
                 rows.append(row)
             report["pieces"][piece] = rows
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "detection_cost.json").write_text(json.dumps(report, indent=1) + "\n")
-    (args.out / "detection_cost.md").write_text(markdown(report))
+    write_results(args.out, "detection_cost", markdown(report), report)
     print(markdown(report))
     return 0
 

@@ -23,7 +23,7 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from benchmarks._common import RESULTS, ROOT, SIM_CACHE
+from benchmarks._common import RESULTS, ROOT, SIM_CACHE, write_results
 from lili_odom.config import load_config
 from lili_odom.evaluation.comparison import run_label as _label
 from lili_odom.evaluation.comparison import seeds_table
@@ -105,8 +105,6 @@ def main(argv: list[str] | None = None) -> int:
     labels = [_label(c, m) for c in args.configs for m in args.methods]
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         rows = list(pool.map(_run, jobs))
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "seeds.json").write_text(json.dumps(rows, indent=1) + "\n")
     lines = ["# Tunnel trials over simulator seeds", "",
              f"`python -m benchmarks.seeds --trials {' '.join(map(str, args.trials))} --seeds "
              f"{' '.join(map(str, args.seeds))} --configs {' '.join(args.configs)}"
@@ -131,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
                  f"{(est / true - 1) * 100:+.2f} %" if true and est else "-"]
         lines.append(f"| {r['trial']} | {r['seed']} | `{r['config']}` | " + " | ".join(cells)
                      + f" | {r['final_m']:.2f} |")
-    (args.out / "seeds.md").write_text("\n".join(lines) + "\n")
+    write_results(args.out, "seeds", "\n".join(lines) + "\n", rows)
     print("\n".join(lines))
     return 0
 

@@ -16,14 +16,13 @@ Usage: ``python -m benchmarks.shapes [--seed 0] [--methods lili zhang hessian] [
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from benchmarks._common import RESULTS
+from benchmarks._common import RESULTS, write_results
 from lili_odom.degeneracy.factory import make_detector, reference_for_detection
 from lili_odom.degeneracy.quality import quality
 from lili_odom.degeneracy.subspace import largest_principal_angle_deg, truth_scaled
@@ -175,11 +174,9 @@ def main(argv: list[str] | None = None) -> int:
                 progress.update(task, description=f"{case.name} {'noisy' if case.noise else 'clean'} {method}")
                 rows.append(run_cell(case, method))
                 progress.advance(task)
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "shapes.json").write_text(json.dumps(rows, indent=1) + "\n")
     md = markdown(rows, args.methods)
     md += f"\nMachine: {platform.machine()}, {platform.python_version()}, seed {args.seed}.\n"
-    (args.out / "shapes.md").write_text(md)
+    write_results(args.out, "shapes", md, rows)
     plot(rows, args.methods, args.out / "shapes.png")
     print(md)
     print(f"wrote {args.out / 'shapes.json'}, {args.out / 'shapes.md'}, {args.out / 'shapes.png'}")

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks._common import RESULTS
+from benchmarks._common import RESULTS, write_results
 from lili_odom.bagio.reader import BagReader
 from lili_odom.messages import odometry_pose_from_msg, scan_from_msg
 from lili_odom.pipeline.scan_matcher import ScanMatcherConfig
@@ -80,9 +80,7 @@ def main(argv=None) -> int:
         lines.append(f"| {res} | " + " | ".join(
             f"{v['truth_m']:.2f} / {v['kiss_m']:.2f} / {v['deficit_m']:.2f}"
             for v in r.values()) + " |")
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "start_from_rest.json").write_text(json.dumps(rows, indent=1) + "\n")
-    (args.out / "start_from_rest.md").write_text("\n".join(lines) + "\n")
+    write_results(args.out, "start_from_rest", "\n".join(lines) + "\n", rows)
     print("\n".join(lines))
     return 0
 

@@ -20,7 +20,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from benchmarks._common import RESULTS, SIM_CACHE, config_with
+from benchmarks._common import RESULTS, SIM_CACHE, config_with, write_results
 from lili_odom.evaluation.runner import run_bag
 from lili_odom.sim.generator import ensure_trial_bag
 
@@ -60,8 +60,6 @@ def main(argv: list[str] | None = None) -> int:
                  **run_window(bag, overrides)}
             print(json.dumps(r), flush=True)
             rows.append(r)
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "start_while_moving.json").write_text(json.dumps(rows, indent=1) + "\n")
     lines = ["# Odometry started while moving (featureless tunnel)", "",
              f"`python -m benchmarks.studies.start_while_moving` (Trial 1, OS1 at {args.resolution}, "
              "seed 0, `lili`). Each cell: ATE [m] (evo, SE(3)-aligned translation RMSE) and, in "
@@ -71,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
         cells = [f"{r['ate_m']:.3f} ({r['degenerate_share']:.0%})" for r in rows
                  if r["start_s"] == start]
         lines.append(f"| {start:.0f}-{start + duration:.0f} s | " + " | ".join(cells) + " |")
-    (args.out / "start_while_moving.md").write_text("\n".join(lines) + "\n")
+    write_results(args.out, "start_while_moving", "\n".join(lines) + "\n", rows)
     print("\n".join(lines))
     return 0
 
