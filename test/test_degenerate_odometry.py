@@ -14,9 +14,7 @@ from lili_odom.bagio.reader import BagReader
 from lili_odom.cli import main as cli_main
 from lili_odom.config import NodeConfig
 from lili_odom.evaluation.metrics import evaluate
-from lili_odom.messages import odometry_pose_from_msg
-from lili_odom.pipeline.feeder import MessageFeeder
-from lili_odom.pipeline.odometry import OdometryPipeline
+from lili_odom.evaluation.replay import Replay
 
 
 @pytest.fixture(scope="module")
@@ -31,17 +29,13 @@ def featureless_bag(tmp_path_factory):
 def _run(bag, method):
     config = NodeConfig()
     config.pipeline.method = method
-    feeder = MessageFeeder(OdometryPipeline(config.pipeline), config)
-    outputs, truth = [], []
+    outputs = []
+    replay = Replay(config, on_output=lambda out, _pipeline: outputs.append(out))
     topics = [config.lidar_topic, config.imu_topic, config.wheel_topic, "/tf_static",
               config.ground_truth_topic]
     with BagReader(bag, topics=topics) as reader:
-        for item in reader:
-            if item.topic == config.ground_truth_topic:
-                truth.append(odometry_pose_from_msg(item.msg))
-            else:
-                outputs += feeder.feed(item.topic, item.msg)
-    outputs += feeder.flush()
+        replay.run(reader)
+    truth = replay.truth
     metrics = evaluate(np.array([o.stamp for o in outputs]), np.array([o.pose for o in outputs]),
                        np.array([s for s, _ in truth]), np.array([T for _, T in truth]))
     return outputs, metrics
