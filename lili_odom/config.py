@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,22 +18,11 @@ from typing import Any
 import numpy as np
 
 from lili_odom.errors import check_range
+from lili_odom.extrinsics import (HUSKY_BASE_TO_SENSOR, OS1_SENSOR_TO_IMU, OS1_SENSOR_TO_LIDAR,
+                                  pose_from_xyz_rpy)
 from lili_odom.pipeline.odometry import PipelineConfig
 
 NODE_NAME = "lili_odom"
-
-
-def pose_from_xyz_rpy(values: typing.Sequence[float]) -> np.ndarray:
-    """4x4 from ``[x, y, z, roll, pitch, yaw]`` (m, rad; R = Rz(yaw) Ry(pitch) Rx(roll))."""
-    x, y, z, roll, pitch, yaw = (float(v) for v in values)
-    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
-                              math.cos(yaw), math.sin(yaw))
-    T = np.eye(4)
-    T[:3, :3] = [[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                 [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                 [-sp, cp * sr, cp * cr]]
-    T[:3, 3] = [x, y, z]
-    return T
 
 
 @dataclass
@@ -42,17 +30,21 @@ class ExtrinsicsConfig:
     """Sensor mounting, ``[x, y, z, roll, pitch, yaw]`` in metres and radians.
 
     Used when the data carries no ``/tf_static`` (or ``use_tf_static`` is false).
-    Defaults: an OS1 on a 0.40 m mast on the Husky top plate, 0.10 m ahead of base_link
+    Defaults (:mod:`lili_odom.extrinsics`): an OS1 0.65 m above and 0.10 m ahead of base_link
     (robot specific: measure yours); ``os_lidar`` yawed 180 deg about z and 36.18 mm above
-    ``os_sensor``; ``os_imu`` at (6.253, -11.775, 7.645) mm from ``os_sensor`` (Ouster
-    datasheet / driver metadata).
+    ``os_sensor``; ``os_imu`` at (6.253, -11.775, 7.645) mm from ``os_sensor``.
+
+    Attributes:
+        base_to_sensor: ``base_link -> os_sensor`` [x, y, z, roll, pitch, yaw] (m, rad).
+        sensor_to_lidar: ``os_sensor -> os_lidar``, the OS1's own.
+        sensor_to_imu: ``os_sensor -> os_imu``, the OS1's own.
+        use_tf_static: take the extrinsics from ``/tf_static`` when it links the base frame
+            to the cloud's frame before the first scan.
     """
 
-    base_to_sensor: list[float] = field(default_factory=lambda: [0.10, 0.0, 0.65, 0.0, 0.0, 0.0])
-    sensor_to_lidar: list[float] = field(
-        default_factory=lambda: [0.0, 0.0, 0.03618, 0.0, 0.0, math.pi])
-    sensor_to_imu: list[float] = field(
-        default_factory=lambda: [0.006253, -0.011775, 0.007645, 0.0, 0.0, 0.0])
+    base_to_sensor: list[float] = field(default_factory=lambda: list(HUSKY_BASE_TO_SENSOR))
+    sensor_to_lidar: list[float] = field(default_factory=lambda: list(OS1_SENSOR_TO_LIDAR))
+    sensor_to_imu: list[float] = field(default_factory=lambda: list(OS1_SENSOR_TO_IMU))
     use_tf_static: bool = True
 
     def T_base_lidar(self) -> np.ndarray:
@@ -231,7 +223,9 @@ def flatten(obj: Any, prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def _coerce(name: str, value: Any, current: Any) -> Any:
+def coerce_parameter(name: str, value: Any, current: Any) -> Any:
+    """``value`` of parameter ``name`` converted to the type of its ``current`` value (bool,
+    int, float, str, list of floats); ValueError naming the parameter when it does not fit."""
     if isinstance(current, bool):
         if not isinstance(value, bool):
             raise ValueError(f"parameter '{name}' must be true or false, got {value!r}")
@@ -267,7 +261,7 @@ def apply_params(config: NodeConfig, params: dict[str, Any]) -> NodeConfig:
         target = config
         for part in path:
             target = getattr(target, part)
-        setattr(target, leaf, _coerce(name, value, getattr(target, leaf)))
+        setattr(target, leaf, coerce_parameter(name, value, getattr(target, leaf)))
     config.validate()
     config.apply_extrinsics()
     return config
