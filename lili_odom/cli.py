@@ -15,13 +15,15 @@ from lili_odom.errors import UserError
 COMMANDS = ("detect", "simulate", "run", "play", "evaluate")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser; ``only`` names the one command to import (the others' modules, and
+    what they import, are left unloaded so a command starts fast), None imports all."""
     parser = argparse.ArgumentParser(
         prog="lili-odom",
         description="Degeneracy-aware LiDAR-inertial odometry (LiLi) tools.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in COMMANDS:
+    for name in COMMANDS if only is None else (only,):
         try:
             module = importlib.import_module(f"lili_odom.commands.{name}")
         except ModuleNotFoundError as exc:
@@ -35,7 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv[0] if argv and argv[0] in COMMANDS else None)
     args = parser.parse_args(argv)
     try:
         return int(args._run(args) or 0)
