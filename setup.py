@@ -45,6 +45,8 @@ setup(
             "ros-jazzy-rmw-fastrtps-cpp",
         ],
         "dev": ["pytest>=7", "hypothesis>=6"],
+        # peers of the scenario suite (`lili-odom suite`); KISS-ICP is already a dependency.
+        "peers": ["genz-icp>=0.3", "rko-lio>=0.4"],
     },
     zip_safe=True,
     maintainer="lili_odom maintainers",
