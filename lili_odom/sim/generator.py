@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from lili_odom.sim import world as world_mod
 from lili_odom.sim.bag_writer import TOPICS, SimBagWriter
@@ -225,6 +226,12 @@ def simulate_bag(req: SimRequest, out: Path | str, progress: bool = True, jobs: 
     # truth over the whole trial too (bit-identical values whatever the window)
     kin = traj.kinematics(t_truth)
     truth_row = {int(i): int(i) for i in ti}
+    # orientations as quaternions, converted once for all messages
+    truth_quat = Rotation.from_matrix(kin.rotation).as_quat()
+    cw, sw = np.cos(wheels.yaw), np.sin(wheels.yaw)
+    R_wheels = np.zeros((len(wheels.yaw), 3, 3))
+    R_wheels[:, 0, 0], R_wheels[:, 0, 1], R_wheels[:, 1, 0], R_wheels[:, 1, 1], R_wheels[:, 2, 2] = cw, -sw, sw, cw, 1.0
+    wheel_quat = Rotation.from_matrix(R_wheels).as_quat()
 
     gyro_var, accel_var = S.imu.gyro_sigma ** 2, S.imu.accel_sigma ** 2
     W = S.wheels
@@ -281,7 +288,7 @@ def simulate_bag(req: SimRequest, out: Path | str, progress: bool = True, jobs: 
                     T[:2, :2] = [[c, -s_], [s_, c]]
                     T[0, 3], T[1, 3] = wheels.x[i], wheels.y[i]
                     m = msgs.odometry(stamp, "odom", "base_link", T, (wheels.v[i], 0.0, 0.0), (0.0, 0.0, wheels.w[i]),
-                                      wheel_pose_cov, wheel_twist_cov)
+                                      wheel_pose_cov, wheel_twist_cov, quat=wheel_quat[i])
                     bag.write("/platform/odom", stamp, msgs.serialize(m))
                 elif kind == 3:
                     r = truth_row[i]
@@ -289,7 +296,7 @@ def simulate_bag(req: SimRequest, out: Path | str, progress: bool = True, jobs: 
                     T[:3, :3] = kin.rotation[r]
                     T[:3, 3] = kin.position[r]
                     v_body = kin.rotation[r].T @ kin.velocity[r]
-                    m = msgs.odometry(stamp, "world", "base_link", T, v_body, kin.omega[r])
+                    m = msgs.odometry(stamp, "world", "base_link", T, v_body, kin.omega[r], quat=truth_quat[r])
                     bag.write("/ground_truth/odom", stamp, msgs.serialize(m))
                 else:
                     data = next(scan_iter)
