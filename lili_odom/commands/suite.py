@@ -71,8 +71,10 @@ def _list() -> int:
 
     from lili_odom.suite.scenario import load_scenarios
 
-    table = Table("scenario", "split", "kind", "sensor", "distance [m]", "duration [s]", "errors",
-                  "ci piece")
+    table = Table(title="scenarios (config/scenarios)")
+    for name in ("scenario", "split", "kind", "sensor", "distance \\[m]", "duration \\[s]", "errors",
+                 "ci piece"):
+        table.add_column(name, no_wrap=True)
     for sc in load_scenarios():
         ci = f"{sc.ci.duration:.0f} s at {sc.ci.resolution[0]}x{sc.ci.resolution[1]}" if sc.ci else "–"
         table.add_row(sc.name, sc.split, sc.kind, sc.sensor.label,

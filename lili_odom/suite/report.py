@@ -218,7 +218,7 @@ def figure(path: Path, title: str, run_dir: Path, methods: list[str]) -> bool:
         return False
     truth = read_tum(truth_path)
     fig, ax = plt.subplots(figsize=(8, 6))
-    ax.plot(truth[1][:, 0, 3], truth[1][:, 1, 3], "k-", lw=2.5, alpha=0.5, label="truth")
+    ax.plot(truth[1][:, 0, 3], truth[1][:, 1, 3], "k-", lw=3, alpha=0.35, label="truth")
     for m in methods:
         est = run_dir / m / "estimate_base.tum"
         if not est.exists():
@@ -229,7 +229,12 @@ def figure(path: Path, title: str, run_dir: Path, methods: list[str]) -> bool:
             xy = None
         if xy is not None:
             ax.plot(xy[:, 0], xy[:, 1], lw=1.2, label=m)
-    ax.set_aspect("equal", adjustable="datalim")
+    # frame the truth: a method that runs away leaves the picture instead of shrinking it
+    lo, hi = truth[1][:, :2, 3].min(axis=0), truth[1][:, :2, 3].max(axis=0)
+    margin = max(5.0, 0.25 * float(np.max(hi - lo)))
+    ax.set_xlim(lo[0] - margin, hi[0] + margin)
+    ax.set_ylim(lo[1] - margin, hi[1] + margin)
+    ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(title)
