@@ -7,7 +7,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
 .PHONY: demo test install benchmark-shapes benchmark-tunnel benchmark-speed \
-	benchmark-detection-cost benchmark-robustness clean
+	benchmark-detection-cost benchmark-robustness benchmark-suite clean
 
 $(STAMP): setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -43,6 +43,13 @@ benchmark-detection-cost: $(STAMP)
 benchmark-robustness: $(STAMP)
 	$(PY) -m benchmarks.faults --resolution 32x256 --play-rates
 	$(PY) -m benchmarks.long_run
+
+# The scenario suite: every scenario (each one's own sensor and window), our methods and the
+# peers (KISS-ICP, GenZ-ICP, RKO-LIO, wheels), one seed each, into benchmarks/results/suite.
+# Bags are simulated once into the simulator cache. Several hours on 2 cores.
+benchmark-suite: $(STAMP)
+	$(PY) -m pip install --quiet -e '.[peers]'
+	$(PY) -m lili_odom.cli suite --preset full --seeds 0 --jobs 2 --out benchmarks/results/suite
 
 clean:
 	rm -rf $(VENV) build install log *.egg-info

@@ -19,6 +19,7 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
         ("share/" + package_name + "/config/worlds", glob("config/worlds/*.yaml")),
+        ("share/" + package_name + "/config/scenarios", glob("config/scenarios/*.yaml")),
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
     ],
     python_requires=">=3.10",
@@ -45,6 +46,8 @@ setup(
             "ros-jazzy-rmw-fastrtps-cpp",
         ],
         "dev": ["pytest>=7", "hypothesis>=6"],
+        # peers of the scenario suite (`lili-odom suite`); KISS-ICP is already a dependency.
+        "peers": ["genz-icp>=0.3", "rko-lio>=0.4"],
     },
     zip_safe=True,
     maintainer="lili_odom maintainers",

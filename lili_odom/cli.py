@@ -12,7 +12,7 @@ import sys
 
 from lili_odom.errors import UserError
 
-COMMANDS = ("detect", "simulate", "run", "play", "evaluate")
+COMMANDS = ("detect", "simulate", "run", "play", "evaluate", "suite")
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:

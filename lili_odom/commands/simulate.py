@@ -1,14 +1,15 @@
-"""``lili-odom simulate {shapes,tunnel}``: write the synthetic data sets."""
+"""``lili-odom simulate {shapes,tunnel,scenario}``: write the synthetic data sets."""
 from __future__ import annotations
 
 import argparse
 import importlib
 
-help = "write synthetic data: degenerate shape pairs, or Husky-in-a-tunnel rosbag2 mcap bags"
+help = "write synthetic data: degenerate shape pairs, Husky-in-a-tunnel or scenario rosbag2 mcap bags"
 
 _KINDS = {
     "shapes": ("lili_odom.sim.shapes_cli", "shape pairs (reference + local scan) with true subspaces"),
     "tunnel": ("lili_odom.sim.tunnel_cli", "a simulated OS1-128 / IMU / wheel odometry tunnel bag"),
+    "scenario": ("lili_odom.suite.scenario_cli", "the bag of one scenario of the suite (config/scenarios)"),
 }
 
 

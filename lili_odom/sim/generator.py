@@ -2,11 +2,15 @@
 
 Public API:
 
-* ``SimRequest`` — what to simulate (world, trial, seed, resolution, feature density, window).
+* ``SimRequest`` — what to simulate (world, trial, seed, resolution, feature density, window,
+  and optional overrides of the LiDAR, IMU and wheel-odometry models).
+* ``sensors_for(request) -> SensorSuite`` — the sensor suite a request simulates.
 * ``simulate_bag(request, out, progress=True, jobs=1) -> BagSummary`` — write one bag.
-* ``ensure_trial_bag(trial, cache_dir=None, **request_fields) -> Path`` — generate or
-  reuse a cached bag; the cache key holds every parameter, the seed and the simulator code
+* ``ensure_bag(request, cache_dir=None, name=None) -> Path`` — generate or reuse a cached bag;
+  the cache key holds every parameter (overrides included), the seed and the simulator code
   version (hash of the simulator sources and of the world file).
+* ``ensure_trial_bag(trial, cache_dir=None, **request_fields) -> Path`` — the same for a trial
+  with the default sensor models.
 
 Time base: trial time t = 0 is mapped to ``EPOCH_NS`` (header stamps are ``EPOCH_NS + t``).
 Messages are written in header-stamp order; a cloud's bag log time is its stamp + one scan
@@ -26,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from lili_odom.sim import world as world_mod
 from lili_odom.sim.bag_writer import TOPICS, SimBagWriter
@@ -36,8 +41,8 @@ from lili_odom.sim.sensors import SensorSuite, default_sensors
 from lili_odom.sim.trajectory import Trajectory
 from lili_odom.sim.wheels import simulate_wheel_odom
 
-__all__ = ["EPOCH_NS", "SimRequest", "BagSummary", "Simulation", "simulate_bag", "ensure_trial_bag",
-           "default_cache_dir", "code_version", "cache_key"]
+__all__ = ["EPOCH_NS", "SimRequest", "BagSummary", "Simulation", "simulate_bag", "ensure_bag", "ensure_trial_bag",
+           "default_cache_dir", "code_version", "cache_key", "sensors_for"]
 
 EPOCH_NS = 1_700_000_000 * 1_000_000_000  # 2023-11-14T22:13:20Z, trial time 0
 
@@ -45,7 +50,10 @@ EPOCH_NS = 1_700_000_000 * 1_000_000_000  # 2023-11-14T22:13:20Z, trial time 0
 @dataclass
 class SimRequest:
     """What to simulate. ``world``: name under config/worlds or a YAML path; ``trial``: key of
-    the world's ``trials``; ``start`` / ``duration`` [s] cut a piece of the trial (trial time)."""
+    the world's ``trials``; ``start`` / ``duration`` [s] cut a piece of the trial (trial time).
+
+    ``lidar``, ``imu``, ``wheels``: field overrides of ``LidarConfig`` (rows and cols come from
+    ``resolution``), ``ImuConfig`` and ``WheelOdomConfig``; ``None`` keeps the defaults."""
 
     world: str = "tunnel"
     trial: int = 1
@@ -54,6 +62,29 @@ class SimRequest:
     feature_density: float | None = None
     start: float = 0.0
     duration: float | None = None
+    lidar: dict | None = None
+    imu: dict | None = None
+    wheels: dict | None = None
+
+
+def _override(config, overrides: dict | None, forbidden: tuple[str, ...] = ()) -> None:
+    """Set the fields named in ``overrides`` on the dataclass ``config`` (unknown names raise)."""
+    names = {f.name for f in dataclasses.fields(config)}
+    for key, value in (overrides or {}).items():
+        if key not in names or key in forbidden:
+            raise ValueError(f"{type(config).__name__} has no settable field {key!r}")
+        if isinstance(value, list):
+            value = tuple(tuple(v) if isinstance(v, list) else v for v in value)
+        setattr(config, key, value)
+
+
+def sensors_for(req: SimRequest) -> SensorSuite:
+    """Sensor suite of ``req``: the defaults at ``req.resolution`` with the request's overrides."""
+    suite = default_sensors(tuple(req.resolution))
+    _override(suite.lidar, req.lidar, forbidden=("rows", "cols"))
+    _override(suite.imu, req.imu)
+    _override(suite.wheels, req.wheels)
+    return suite
 
 
 @dataclass
@@ -101,7 +132,7 @@ class Simulation:
 
     def __init__(self, req: SimRequest, sensors: SensorSuite | None = None):
         self.req = req
-        self.sensors = sensors or default_sensors(tuple(req.resolution))
+        self.sensors = sensors or sensors_for(req)
         self.world = world_mod.load_world(req.world)
         if req.trial not in self.world.trials:
             raise ValueError(f"world {self.world.name!r} has no trial {req.trial} (has {sorted(self.world.trials)})")
@@ -186,7 +217,7 @@ def simulate_bag(req: SimRequest, out: Path | str, progress: bool = True, jobs: 
     events: list[tuple[int, int, int]] = []
     events.append((_ns(t0), 0, 0))
     events += [(_ns(imu.t[i]), 1, i) for i in sel(imu.t)]
-    events += [(_ns(wheels.t[i]), 2, i) for i in sel(wheels.t)]
+    events += [(_ns(wheels.t[i]), 2, i) for i in sel(wheels.t) if wheels.published[i]]
     ti = sel(t_truth)
     events += [(_ns(t_truth[i]), 3, i) for i in ti]
     events += [(_ns(t), 4, k) for k, t in enumerate(scan_t)]
@@ -195,6 +226,12 @@ def simulate_bag(req: SimRequest, out: Path | str, progress: bool = True, jobs: 
     # truth over the whole trial too (bit-identical values whatever the window)
     kin = traj.kinematics(t_truth)
     truth_row = {int(i): int(i) for i in ti}
+    # orientations as quaternions, converted once for all messages
+    truth_quat = Rotation.from_matrix(kin.rotation).as_quat()
+    cw, sw = np.cos(wheels.yaw), np.sin(wheels.yaw)
+    R_wheels = np.zeros((len(wheels.yaw), 3, 3))
+    R_wheels[:, 0, 0], R_wheels[:, 0, 1], R_wheels[:, 1, 0], R_wheels[:, 1, 1], R_wheels[:, 2, 2] = cw, -sw, sw, cw, 1.0
+    wheel_quat = Rotation.from_matrix(R_wheels).as_quat()
 
     gyro_var, accel_var = S.imu.gyro_sigma ** 2, S.imu.accel_sigma ** 2
     W = S.wheels
@@ -251,7 +288,7 @@ def simulate_bag(req: SimRequest, out: Path | str, progress: bool = True, jobs: 
                     T[:2, :2] = [[c, -s_], [s_, c]]
                     T[0, 3], T[1, 3] = wheels.x[i], wheels.y[i]
                     m = msgs.odometry(stamp, "odom", "base_link", T, (wheels.v[i], 0.0, 0.0), (0.0, 0.0, wheels.w[i]),
-                                      wheel_pose_cov, wheel_twist_cov)
+                                      wheel_pose_cov, wheel_twist_cov, quat=wheel_quat[i])
                     bag.write("/platform/odom", stamp, msgs.serialize(m))
                 elif kind == 3:
                     r = truth_row[i]
@@ -259,7 +296,7 @@ def simulate_bag(req: SimRequest, out: Path | str, progress: bool = True, jobs: 
                     T[:3, :3] = kin.rotation[r]
                     T[:3, 3] = kin.position[r]
                     v_body = kin.rotation[r].T @ kin.velocity[r]
-                    m = msgs.odometry(stamp, "world", "base_link", T, v_body, kin.omega[r])
+                    m = msgs.odometry(stamp, "world", "base_link", T, v_body, kin.omega[r], quat=truth_quat[r])
                     bag.write("/ground_truth/odom", stamp, msgs.serialize(m))
                 else:
                     data = next(scan_iter)
@@ -291,24 +328,18 @@ def default_cache_dir() -> Path:
     return Path("data") / "sim"
 
 
-def ensure_trial_bag(trial: int, cache_dir: Path | str | None = None, *, world: str = "tunnel", seed: int = 0,
-                     resolution: tuple[int, int] | str = (128, 1024), feature_density: float | None = None,
-                     start: float = 0.0, duration: float | None = None, progress: bool = True,
-                     jobs: int | None = None) -> Path:
-    """Return the path of a cached bag for these parameters, simulating it first if needed.
+def ensure_bag(req: SimRequest, cache_dir: Path | str | None = None, name: str | None = None, *,
+               progress: bool = True, jobs: int | None = None) -> Path:
+    """Return the path of a cached bag for ``req``, simulating it first if needed.
 
-    The bag directory is ``<cache_dir>/<world>_trial<N>_<rows>x<cols>_seed<S>_<key>``; a JSON
-    sidecar ``<dir>.json`` records the request and summary. Generation writes to a temporary
-    directory and renames it at the end, so an interrupted run never leaves a bag that looks
-    complete."""
-    from lili_odom.sim.sensors import parse_resolution
-
-    if isinstance(resolution, str):
-        resolution = parse_resolution(resolution)
-    req = SimRequest(world=world, trial=int(trial), seed=int(seed), resolution=tuple(resolution),
-                     feature_density=feature_density, start=float(start), duration=duration)
+    The bag directory is ``<cache_dir>/<name>_<key>`` (``name`` defaults to
+    ``<world>_trial<N>_<rows>x<cols>_seed<S>``); a JSON sidecar ``<dir>.json`` records the
+    request and summary. Generation writes to a temporary directory and renames it at the end,
+    so an interrupted run never leaves a bag that looks complete."""
+    rows, cols = req.resolution
+    name = name or f"{Path(req.world).stem}_trial{req.trial}_{rows}x{cols}_seed{req.seed}"
+    name = f"{name}_{cache_key(req)}"
     cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    name = f"{Path(world).stem}_trial{trial}_{resolution[0]}x{resolution[1]}_seed{seed}_{cache_key(req)}"
     final = cache_dir / name
     if (final / "metadata.yaml").exists():
         return final
@@ -331,3 +362,18 @@ def ensure_trial_bag(trial: int, cache_dir: Path | str | None = None, *, world: 
                "wall_time_s": summary.wall_time, **summary.extra}
     (cache_dir / f"{name}.json").write_text(json.dumps(sidecar, indent=2, default=str))
     return final
+
+
+def ensure_trial_bag(trial: int, cache_dir: Path | str | None = None, *, world: str = "tunnel", seed: int = 0,
+                     resolution: tuple[int, int] | str = (128, 1024), feature_density: float | None = None,
+                     start: float = 0.0, duration: float | None = None, progress: bool = True,
+                     jobs: int | None = None) -> Path:
+    """``ensure_bag`` for a trial of ``world`` with the default sensor models: the bag directory
+    is ``<cache_dir>/<world>_trial<N>_<rows>x<cols>_seed<S>_<key>``."""
+    from lili_odom.sim.sensors import parse_resolution
+
+    if isinstance(resolution, str):
+        resolution = parse_resolution(resolution)
+    req = SimRequest(world=world, trial=int(trial), seed=int(seed), resolution=tuple(resolution),
+                     feature_density=feature_density, start=float(start), duration=duration)
+    return ensure_bag(req, cache_dir, progress=progress, jobs=jobs)

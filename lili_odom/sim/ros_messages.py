@@ -132,10 +132,13 @@ class MessageFactory:
         )
 
     def odometry(self, t_ns: int, frame: str, child: str, T: np.ndarray, v_lin, v_ang,
-                 pose_cov: np.ndarray | None = None, twist_cov: np.ndarray | None = None):
-        """Odometry: pose ``T`` (4x4) of ``child`` in ``frame``; twist (linear, angular) in child."""
+                 pose_cov: np.ndarray | None = None, twist_cov: np.ndarray | None = None,
+                 quat: np.ndarray | None = None):
+        """Odometry: pose ``T`` (4x4) of ``child`` in ``frame``; twist (linear, angular) in child.
+        ``quat`` (x, y, z, w) of ``T``'s rotation when already known (saves converting it here)."""
+        q = _quat(T[:3, :3]) if quat is None else quat
         pose = self.Pose(position=self.Point(x=float(T[0, 3]), y=float(T[1, 3]), z=float(T[2, 3])),
-                         orientation=self._q(_quat(T[:3, :3])))
+                         orientation=self._q(q))
         return self.Odometry(
             header=self.header(t_ns, frame),
             child_frame_id=child,

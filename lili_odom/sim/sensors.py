@@ -125,6 +125,11 @@ class WheelOdomConfig:
     slip_duration_range: tuple[float, float] = (0.3, 1.5)  # s
     slip_speed_gain_range: tuple[float, float] = (0.1, 0.35)  # measured speed over-reads by this
     slip_yaw_rate_sigma: float = 0.03  # rad/s spurious yaw rate during a slip (one side spins)
+    # Fixed error profile (scenario data); the defaults keep the random model above.
+    scale_error: float | None = None      # fixed speed scale error e_v (0.03 = over-reads 3 %)
+    yaw_scale_error: float | None = None  # fixed yaw-rate scale error e_w
+    slip_events: tuple[tuple[float, float, float], ...] | None = None  # (t [s], duration [s], gain)
+    outages: tuple[tuple[float, float], ...] = ()  # [t0, t1) trial-time windows without messages
 
 
 @dataclass

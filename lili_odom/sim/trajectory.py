@@ -5,7 +5,7 @@ the lane ``l(s)`` (lane offset + a slow weave) with a speed profile made of smoo
 (``3u^2 - 2u^3``, so acceleration is continuous and bounded by ``max_accel``), cruises at random
 Husky-like speeds, and makes full stops. Between legs of opposite direction it turns in place
 (quintic yaw blend). Heading is the tangent of the driven path (no side slip), z / roll / pitch
-follow the floor under the four wheels, so bumps give some vertical, roll and pitch motion.
+follow the floor under the four wheels, so bumps and ramps give vertical, roll and pitch motion.
 
 Time ``t`` [s] runs from 0 at the trial start. Everything is vectorised over arrays of ``t`` and
 analytic in ``t``, so derivatives by central differences (``kinematics``) are accurate to ~1e-6.
@@ -144,7 +144,10 @@ class Trajectory:
             # stops inside this leg
             lo, hi = p.stop_s_range or (min(leg.s_start, leg.s_end), max(leg.s_start, leg.s_end))
             stops = []
-            for _ in range(200):
+            if p.stop_s is not None:  # fixed places: those inside this leg
+                stops = [leg.dir * (s - leg.s_start) for s in p.stop_s]
+                stops = [d for d in stops if 1.0 < d < leg.length - 1.0]
+            for _ in range(200 if p.stop_s is None else 0):
                 if len(stops) >= p.stops:
                     break
                 s = rng.uniform(lo, hi)

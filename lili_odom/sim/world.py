@@ -9,8 +9,11 @@ Conventions of the description:
 * The centreline starts at the portal, the origin, heading +x. Arc length ``s`` along it; for
   ``s < 0`` (outside) it continues straight along -x, for ``s > length`` straight ahead.
   ``l`` is the lateral offset, positive to the left of the +s direction.
-* The floor is ``z = floor_height(x, y)``: a sum of plane waves (small bumps) defined in world
-  x, y so that the mesh and the trajectory (wheel contacts) use exactly the same surface.
+* The floor is ``z = floor_height(x, y)``: a sum of plane waves (small bumps) plus optional
+  ramps (slopes, declines), defined in world x, y so that the mesh and the trajectory (wheel
+  contacts) use exactly the same surface. The tube's walls and ceiling follow the ramps.
+* ``tube: false`` keeps the centreline as the driven path but builds no tube (open areas,
+  halls made of objects).
 * Every triangle carries a material (reflectivity in [0, 1] as the Ouster reports it /100, and an
   ``outdoor`` flag used for the ambient channel).
 
@@ -34,6 +37,7 @@ __all__ = [
     "Segment",
     "CrossSection",
     "FloorWave",
+    "Ramp",
     "Floor",
     "ObjectSpec",
     "ClutterSpec",
@@ -107,10 +111,25 @@ class FloorWave:
 
 
 @dataclass
+class Ramp:
+    """A slope of the floor along world direction ``direction_deg`` (from +x): with ``p`` the
+    coordinate along that direction [m], the height changes by ``grade`` (dz/dp, e.g. -0.12 for
+    a 12 % decline) between ``start`` and ``start + length``, flat before and after. The grade is
+    blended in and out linearly over ``transition`` m (continuous pitch)."""
+
+    direction_deg: float = 0.0
+    start: float = 0.0
+    length: float = 50.0
+    grade: float = -0.1
+    transition: float = 5.0
+
+
+@dataclass
 class Floor:
     """Floor bumps: explicit ``waves`` and/or ``random_waves`` random ones of RMS height ``rms``
-    and wavelengths in ``wavelength_range``, drawn with ``seed``."""
+    and wavelengths in ``wavelength_range``, drawn with ``seed``; ``ramps`` add slopes."""
 
+    ramps: list[Ramp] = field(default_factory=list)
     waves: list[FloorWave] = field(default_factory=list)
     random_waves: int = 0
     rms: float = 0.015
@@ -124,7 +143,9 @@ class ObjectSpec:
 
     kinds: ``box`` (``size`` = length, width, height), ``cylinder`` (``radius``, ``height``),
     ``vehicle`` (a body box plus a cab box), ``bush`` (a lumpy blob of ``radius``),
-    ``wall`` (a box; same as box, named for readability)."""
+    ``wall`` (a box; same as box, named for readability). ``z_offset`` lifts it above the floor
+    (a ceiling slab, a shelf). ``count`` copies are placed at ``position + k * step`` (k = 0..count-1),
+    for rows of pillars or racks."""
 
     kind: str = "box"
     position: tuple[float, float] = (0.0, 0.0)
@@ -134,6 +155,8 @@ class ObjectSpec:
     height: float = 1.0
     z_offset: float = 0.0
     material: str = "metal"
+    count: int = 1
+    step: tuple[float, float] = (0.0, 0.0)
 
 
 @dataclass
@@ -176,7 +199,8 @@ class FeatureSpec:
 
     kinds: ``light`` (box of ``size`` hung at the crown, or at ``height`` on ``side``),
     ``tray`` (cable tray section of ``size`` on a wall at ``height``), ``niche`` (recess of
-    ``size`` = length, depth, height cut into a wall)."""
+    ``size`` = length, depth, height cut into a wall; a deep one is a side gallery or a door).
+    ``s_range`` limits this item to part of the tube (within ``Features.s_range``)."""
 
     kind: str = "light"
     spacing: float = 25.0
@@ -185,6 +209,7 @@ class FeatureSpec:
     height: float = 0.0
     side: str = "crown"  # crown | left | right | alternate
     material: str = "light"
+    s_range: tuple[float, float] | None = None
 
 
 @dataclass
@@ -201,7 +226,8 @@ class Features:
 class TrialPlan:
     """Motion of one trial: ``legs`` as (s_start, s_end) along the centreline (a sign change of
     direction between legs means an in-place turn-around), lane offset (negative = right of the
-    travel direction), speeds [m/s], accelerations [m/s^2], full stops inside the tube."""
+    travel direction), speeds [m/s], accelerations [m/s^2], full stops inside the tube: ``stops``
+    per leg at random places in ``stop_s_range``, or at the fixed arc lengths ``stop_s``."""
 
     legs: list[tuple[float, float]] = field(default_factory=lambda: [(-15.0, 100.0)])
     lane_offset: float = -0.8
@@ -214,6 +240,7 @@ class TrialPlan:
     stops: int = 2
     stop_duration_range: tuple[float, float] = (3.0, 6.0)
     stop_s_range: tuple[float, float] | None = None
+    stop_s: list[float] | None = None
     start_idle: float = 2.0
     end_idle: float = 2.0
     turn_rate: float = 0.5
@@ -221,11 +248,13 @@ class TrialPlan:
 
 @dataclass
 class WorldDescription:
-    """A whole world. ``segments`` empty means no tube (open field)."""
+    """A whole world. ``segments`` empty means no tube (open field); ``tube`` false keeps the
+    segments as the driven path only."""
 
     name: str = "world"
     description: str = ""
     segments: list[Segment] = field(default_factory=list)
+    tube: bool = True
     cross_section: CrossSection = field(default_factory=CrossSection)
     floor: Floor = field(default_factory=Floor)
     materials: dict[str, Material] = field(default_factory=dict)
@@ -266,7 +295,7 @@ _NESTED = {
     "Segment": Segment, "CrossSection": CrossSection, "Floor": Floor, "FloorWave": FloorWave,
     "ObjectSpec": ObjectSpec, "ClutterSpec": ClutterSpec, "Outside": Outside,
     "FeatureSpec": FeatureSpec, "Features": Features, "TrialPlan": TrialPlan,
-    "Material": Material,
+    "Material": Material, "Ramp": Ramp,
 }
 
 
@@ -410,9 +439,10 @@ class Centreline:
 
 
 class FloorField:
-    """Floor height ``z = sum a sin(k . (x, y) + phase)`` [m] in world coordinates."""
+    """Floor height ``z = sum a sin(k . (x, y) + phase) + ramps`` [m] in world coordinates."""
 
     def __init__(self, floor: Floor):
+        self.ramps = list(floor.ramps)
         waves = list(floor.waves)
         if floor.random_waves > 0:
             rng = np.random.default_rng(floor.seed)
@@ -434,11 +464,32 @@ class FloorField:
 
     def height(self, xy: np.ndarray) -> np.ndarray:
         """Floor height at world (x, y) points of shape (..., 2)."""
+        return self.bumps(xy) + self.grade_height(xy)
+
+    def bumps(self, xy: np.ndarray) -> np.ndarray:
+        """The plane-wave part of the floor height (only the floor itself has it)."""
         xy = np.asarray(xy, dtype=float)
         if len(self.amp) == 0:
             return np.zeros(xy.shape[:-1])
         arg = xy @ self.kvec.T + self.phase
         return np.sin(arg) @ self.amp
+
+    def grade_height(self, xy: np.ndarray) -> np.ndarray:
+        """The ramp part of the floor height (walls and ceilings of a tube follow it)."""
+        xy = np.asarray(xy, dtype=float)
+        z = np.zeros(xy.shape[:-1])
+        for r in self.ramps:
+            a = np.deg2rad(r.direction_deg)
+            p = xy[..., 0] * np.cos(a) + xy[..., 1] * np.sin(a)
+            w = float(np.clip(r.transition, 1e-6, 0.5 * r.length))
+            z += r.grade * (_ramp_integral(p - r.start + 0.5 * w, w) - _ramp_integral(p - r.start - r.length + 0.5 * w, w))
+        return z
+
+
+def _ramp_integral(u: np.ndarray, w: float) -> np.ndarray:
+    """Integral of a unit step blended linearly over [0, w]: 0 before, u^2 / 2w, then u - w/2."""
+    u = np.asarray(u, dtype=float)
+    return np.where(u <= 0, 0.0, np.where(u < w, u * u / (2 * w), u - 0.5 * w))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -582,7 +633,7 @@ def build_mesh(world: WorldDescription, feature_density: float | None = None) ->
     density = world.features.density if feature_density is None else float(feature_density)
     b = _Builder(dict(world.materials))
     floor = FloorField(world.floor)
-    if world.segments:
+    if world.segments and world.tube:
         _build_tube(b, world, floor, density)
     _build_outside(b, world, floor)
     return b.finish()
@@ -600,7 +651,8 @@ def _build_tube(b: _Builder, world: WorldDescription, floor: FloorField, density
     # vertices: ring i, profile j
     P = xy[:, None, :] + prof[None, :, 0, None] * n[:, None, :]
     z = np.broadcast_to(prof[None, :, 1], (ns, M)).copy()
-    z[:, is_floor] += floor.height(P[:, is_floor])
+    z += floor.grade_height(P)
+    z[:, is_floor] += floor.bumps(P[:, is_floor])
     V = np.concatenate([P, z[..., None]], -1)  # (ns, M, 3)
 
     # niches: recesses cut into the walls; mark the quads to drop
@@ -610,7 +662,10 @@ def _build_tube(b: _Builder, world: WorldDescription, floor: FloorField, density
     s_lo, s_hi = max(s_lo, 0.0), min(s_hi, L)
     extra = []
     for k, spec in enumerate(world.features.items):
-        for idx, sf in enumerate(_feature_positions(spec, density, s_lo + 1, s_hi - 1, rng)):
+        lo, hi = s_lo, s_hi
+        if spec.s_range is not None:
+            lo, hi = max(lo, spec.s_range[0]), min(hi, spec.s_range[1])
+        for idx, sf in enumerate(_feature_positions(spec, density, lo + 1, hi - 1, rng)):
             side = spec.side
             if side == "alternate":
                 side = "left" if idx % 2 == 0 else "right"
@@ -689,11 +744,12 @@ def _add_feature(b: _Builder, line: Centreline, floor: FloorField, cs: CrossSect
     xy, h, _ = line.evaluate(sf)
     xy, h = xy[0], float(h[0])
     n = np.array([-np.sin(h), np.cos(h)])
+    dz = float(floor.grade_height(xy))
     L, W, H = spec.size
     hw = cs.width / 2.0 if cs.shape != "circular" else np.sqrt(max(cs.radius**2 - (cs.height - cs.radius) ** 2, 0))
     if side == "crown":
         top = cs.height if cs.shape != "horseshoe" else cs.wall_height + cs.width / 2
-        c = np.r_[xy, top - 0.15 - H / 2]
+        c = np.r_[xy, top - 0.15 - H / 2 + dz]
         b.add_mesh(_box((L, W, H), _pose(*c, h)), spec.material)
         return
     sign = 1.0 if side == "left" else -1.0
@@ -704,12 +760,12 @@ def _add_feature(b: _Builder, line: Centreline, floor: FloorField, cs: CrossSect
     elif cs.shape == "horseshoe" and z > cs.wall_height:
         hw = np.sqrt(max(hw**2 - (z - cs.wall_height) ** 2, 0.0))
     lat = sign * (hw - 0.02 - W / 2)
-    c = np.r_[xy + lat * n, z]
+    c = np.r_[xy + lat * n, z + dz]
     b.add_mesh(_box((L, W, H), _pose(*c, h)), spec.material)
     if spec.kind == "tray":  # a few brackets down to the wall make it look like a tray
         for u in (-L / 2 + 0.1, L / 2 - 0.1):
             p = xy + lat * n + u * np.array([np.cos(h), np.sin(h)])
-            b.add_mesh(_box((0.05, W, 0.05), _pose(p[0], p[1], z - H / 2 - 0.05, h)), "metal")
+            b.add_mesh(_box((0.05, W, 0.05), _pose(p[0], p[1], z + dz - H / 2 - 0.05, h)), "metal")
 
 
 def _build_outside(b: _Builder, world: WorldDescription, floor: FloorField) -> None:
@@ -723,7 +779,7 @@ def _build_outside(b: _Builder, world: WorldDescription, floor: FloorField) -> N
         XY = np.stack([X, Y], -1)
         V = np.concatenate([XY, floor.height(XY)[..., None]], -1).reshape(-1, 3)
         b.add(V, _grid_faces(len(xs), len(ys)), out.ground_material)
-    if out.portal and world.segments:
+    if out.portal and world.segments and world.tube:
         prof, _ = profile_points(world.cross_section)
         c = out.portal_cell
         ys = np.arange(-out.portal_width / 2, out.portal_width / 2 + 1e-9, c)
@@ -735,7 +791,10 @@ def _build_outside(b: _Builder, world: WorldDescription, floor: FloorField) -> N
         F = _grid_faces(len(ys), len(zs)).reshape(2, -1, 3)
         b.add(V, F[:, ~opening].reshape(-1, 3), out.portal_material)
     for obj in out.objects:
-        _add_object(b, floor, obj, None)
+        for k in range(max(int(obj.count), 0)):
+            x, y = obj.position
+            placed = dataclasses.replace(obj, position=(x + k * obj.step[0], y + k * obj.step[1]))
+            _add_object(b, floor, placed, None)
     for spec in out.clutter:
         rng = np.random.default_rng(spec.seed)
         placed = 0
