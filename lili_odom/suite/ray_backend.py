@@ -229,7 +229,12 @@ def run_task(job: Job, fingerprint: str | None = None,
             except Exception as exc:  # noqa: BLE001 - the job fails, not the worker
                 row = error_row(job, f"bag: {type(exc).__name__}: {exc}")
             else:
-                row = run(local)
+                try:
+                    row = run(local)
+                except KeyboardInterrupt:
+                    raise
+                except Exception as exc:  # noqa: BLE001 - execute() itself never raises
+                    row = error_row(job, f"{type(exc).__name__}: {exc}")
         files = _pack(job_dir, workdir / "truth.tum")
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
