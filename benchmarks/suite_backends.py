@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import shlex
 import shutil
 import subprocess
@@ -76,15 +77,16 @@ def compare(local: dict, ray: dict) -> dict:
 
 def markdown(result: dict, commands: dict) -> str:
     lines = ["# Suite rows: `--backend local` against `--backend ray`", "",
-             "Produced by `python benchmarks/suite_backends.py` "
-             f"({' '.join(shlex.quote(a) for a in result['suite_args'])}).", ""]
+             "The rows of the two suite runs below, compared by `python benchmarks/suite_backends.py` "
+             "(which runs both itself; `--compare-only` compares two existing outputs).", ""]
     for name, cmd in commands.items():
+        cmd = re.sub(r"--out \S+", f"--out WORK/{name}", cmd)
+        cmd = re.sub(r"^\S*python\S* -m lili_odom.cli ", "lili-odom ", cmd)
         lines.append(f"- {name}: `{cmd}`")
     lines += ["", f"Bit-identical rows (metrics {', '.join(METRICS)}): "
               f"**{result['identical_rows']} of {result['total_rows']}**; largest absolute "
-              f"difference of any metric: {result['max_abs_diff']}. Wall time: local "
-              f"{result['wall_time_s']['local']} s, ray {result['wall_time_s']['ray']} s "
-              "(timings differ by design and are not compared).", "",
+              f"difference of any metric: {result['max_abs_diff']} (timings `scans_per_s`, `wall_s` "
+              "are not compared).", "",
               "| scenario | seed | method | ATE local [m] | ATE ray [m] | max abs. diff | identical |",
               "|---|---:|---|---:|---:|---:|---|"]
     for r in result["rows"]:

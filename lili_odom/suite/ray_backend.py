@@ -388,9 +388,9 @@ class Collector:
         for handle, (_, future) in running:
             with contextlib.suppress(Exception):
                 self._cancel(handle)
-            _cancel_future(future)
+            future.cancel()  # futures stay pending until their row arrives: no row is written
         for _, future in queued:
-            _cancel_future(future)
+            future.cancel()
 
     def close(self) -> None:
         """Wait for every outstanding job, then stop the collecting thread."""
@@ -399,11 +399,6 @@ class Collector:
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
-
-
-def _cancel_future(future: Future) -> None:
-    """Cancel a job's future (kept pending until its row arrives), so no row is written."""
-    future.cancel()
 
 
 class RayBackend:
