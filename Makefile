@@ -51,5 +51,12 @@ benchmark-suite: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[peers]'
 	$(PY) -m lili_odom.cli suite --preset full --seeds 0 --jobs 2 --out benchmarks/results/suite
 
+# Are the suite's rows the same on `--backend local` and `--backend ray` (a local Ray instance)?
+# CI pieces of two scenarios, deterministic configuration; see docs/cluster.md.
+.PHONY: benchmark-suite-backends
+benchmark-suite-backends: $(STAMP)
+	$(PY) -m pip install --quiet -e '.[cluster]'
+	$(PY) benchmarks/suite_backends.py --out benchmarks/results/suite_backends
+
 clean:
 	rm -rf $(VENV) build install log *.egg-info

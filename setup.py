@@ -48,6 +48,8 @@ setup(
         "dev": ["pytest>=7", "hypothesis>=6"],
         # peers of the scenario suite (`lili-odom suite`); KISS-ICP is already a dependency.
         "peers": ["genz-icp>=0.3", "rko-lio>=0.4"],
+        # `lili-odom suite --backend ray`: the suite's jobs as tasks on a Ray cluster.
+        "cluster": ["ray>=2.40"],
     },
     zip_safe=True,
     maintainer="lili_odom maintainers",

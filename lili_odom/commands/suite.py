@@ -8,6 +8,7 @@ Examples::
     lili-odom suite --scenarios building tunnel --methods none lili --peers genz wheels \\
         --seeds 0 --jobs 2 --out suite_out
     lili-odom suite --bags my_run1 my_run2 --truth-topic /gps/odom --out suite_user
+    lili-odom suite --preset ci --backend ray --address HEAD_IP:6379 --out suite_ci
 
 Writes ``OUT/suite.json`` (row by row), ``OUT/suite.md``, ``OUT/NAME.png`` and the runs
 under ``OUT/runs/NAME/seedK/METHOD/`` (see :mod:`lili_odom.suite.report`).
@@ -59,7 +60,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="per-run files: trajectories, our runs' outputs (default OUT/runs)")
     parser.add_argument("--jobs", type=int, default=None,
                         help="jobs at the same time (default: min(2, cores))")
-    parser.add_argument("--backend", choices=BACKENDS, default="local")
+    parser.add_argument("--backend", choices=BACKENDS, default="local",
+                        help="local: processes on this machine; ray: one Ray task per job "
+                             "(pip install 'lili_odom[cluster]')")
+    parser.add_argument("--address", metavar="ADDR",
+                        help="with --backend ray: the Ray cluster (HOST:PORT of `ray start --head`, "
+                             "or auto); default: a Ray instance on this machine")
     parser.add_argument("--timeout", type=float, default=None, help="stop a job after this many seconds")
     parser.add_argument("--cache-dir", type=Path, help="simulator cache (default $LILI_ODOM_SIM_CACHE or data/sim)")
     parser.add_argument("--resume", action="store_true",
@@ -147,7 +153,16 @@ def run(args: argparse.Namespace) -> int:
         cache_dir=str(args.cache_dir) if args.cache_dir else None, resume=args.resume,
         work_dir=args.work_dir,
         command=command)
-    backend = make_backend(args.backend, jobs, timeout_s=args.timeout)
+    if args.backend != "ray" and args.address:
+        raise UserError("--address needs --backend ray")
+    if args.backend == "ray" and args.timeout is not None:
+        raise UserError("--timeout is not supported with --backend ray")
+    # on a cluster without --jobs, Ray schedules one task per free CPU of its nodes
+    backend_jobs = None if args.backend == "ray" and args.address and args.jobs is None else jobs
+    try:
+        backend = make_backend(args.backend, backend_jobs, timeout_s=args.timeout, address=args.address)
+    except (RuntimeError, ConnectionError) as exc:
+        raise UserError(f"--backend {args.backend}: {exc}") from None
     try:
         doc = run_suite(request, backend, progress=not args.no_progress)
     except ValueError as exc:

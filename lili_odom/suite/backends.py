@@ -6,6 +6,9 @@ of its row (``submit(job) -> Future[dict]``); the runner collects rows as they f
   crash ends only that job: it becomes a row with ``error`` naming the exit signal. A job's
   stdout/stderr (native libraries print there) go to ``<job dir>/log.txt``.
 
+* :class:`~lili_odom.suite.ray_backend.RayBackend` (``--backend ray``): one Ray task per job
+  on a Ray cluster or a Ray instance on this machine (``pip install 'lili_odom[cluster]'``).
+
 A backend for a cluster implements the same two methods and sets ``prepares_bags`` False:
 its tasks then resolve (simulate or fetch from their node's cache) their bag themselves via
 ``job.bag.resolve()``, which is keyed by content, so a bag is simulated at most once per node.
@@ -25,7 +28,7 @@ from lili_odom.suite.jobs import Job, error_row, execute
 
 log = logging.getLogger(__name__)
 
-BACKENDS = ("local",)
+BACKENDS = ("local", "ray")
 
 
 class Backend(Protocol):
@@ -146,8 +149,14 @@ class LocalBackend:
         self._pool.shutdown(wait=True, cancel_futures=cancel)
 
 
-def make_backend(name: str, jobs: int, timeout_s: float | None = None) -> Backend:
-    """The backend called ``name`` (:data:`BACKENDS`)."""
+def make_backend(name: str, jobs: int | None, timeout_s: float | None = None,
+                 address: str | None = None) -> Backend:
+    """The backend called ``name`` (:data:`BACKENDS`); ``address``: the Ray cluster of
+    ``ray`` (None: a Ray instance on this machine with ``jobs`` CPUs)."""
     if name == "local":
-        return LocalBackend(jobs=jobs, timeout_s=timeout_s)
+        return LocalBackend(jobs=jobs or 1, timeout_s=timeout_s)
+    if name == "ray":
+        from lili_odom.suite.ray_backend import RayBackend
+
+        return RayBackend(address=address, jobs=jobs)
     raise ValueError(f"unknown backend {name!r} (available: {', '.join(BACKENDS)})")
