@@ -103,3 +103,23 @@ def test_config_validation():
     with pytest.raises(ValueError, match="plane_refinement.independent_fraction"):
         PlaneRefinementConfig(independent_fraction=0.0).validate()
     PlaneRefinementConfig().validate()
+
+
+def test_the_odometry_clears_directions_point_to_plane_holds():
+    from lili_odom.degeneracy.result import DegeneracyResult
+    from lili_odom.pipeline.odometry import OdometryPipeline, PipelineConfig
+    from lili_odom.pipeline.plane_refinement import PlaneRefinement
+
+    basis = np.vstack([AXIS_X, AXIS_Y])
+    det = DegeneracyResult("lili", np.eye(4), basis, 10.0)
+    info = np.diag([5000.0, 10.0])  # x held to 1.4 cm, y to 32 cm
+    refined = PlaneRefinement(np.eye(4), info, basis.T @ info @ basis, basis)
+    pipeline = OdometryPipeline(PipelineConfig())
+    left, left_info = pipeline._clear_held_directions(det, refined)
+    assert left.dimension == 1 and np.allclose(np.abs(left.basis_scaled), AXIS_Y)
+    assert np.allclose(left_info, 10.0 * AXIS_Y.T @ AXIS_Y)
+    assert left.details["cleared"] == 1 and pipeline.counters["directions_cleared"] == 1
+    off = OdometryPipeline(PipelineConfig(plane_refinement=PlaneRefinementConfig(
+        clear_information=0.0)))
+    same, same_info = off._clear_held_directions(det, refined)
+    assert same.dimension == 2 and np.allclose(same_info, refined.information_scaled)

@@ -28,7 +28,7 @@ from __future__ import annotations
 import logging
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -372,9 +372,11 @@ class OdometryPipeline:
                                          degeneracy.basis_scaled,
                                          degeneracy.characteristic_length, refine)
             if refined.ok:
-                subspace = SubspaceMeasurement(refined.pose @ np.linalg.inv(T_bl),
-                                               refined.information_scaled,
-                                               degeneracy.characteristic_length)
+                degeneracy, info = self._clear_held_directions(degeneracy, refined)
+                measured = refined.pose
+                if degeneracy.degenerate:
+                    subspace = SubspaceMeasurement(refined.pose @ np.linalg.inv(T_bl), info,
+                                                   degeneracy.characteristic_length)
             else:
                 self.counters["refinement_failures"] += 1
         elif (refine.enabled and refine.along_track and reg.ok and not first
@@ -439,6 +441,31 @@ class OdometryPipeline:
         self._last_output = out
         self.counters["processed"] += 1
         return out
+
+    def _clear_held_directions(self, degeneracy: DegeneracyResult, refined
+                               ) -> tuple[DegeneracyResult, np.ndarray]:
+        """The detection without the directions point-to-plane holds as well as a
+        well-constrained one (information >= ``plane_refinement.clear_information``), and the
+        subspace information (scaled, 6x6) of the directions left.
+
+        Point-to-point LiLi flags a direction whose perturbations do not come back; in a young
+        local map, whose sampling pattern moved with the sensor, that happens along the
+        direction of travel in a well-constrained hall too. Such a direction is measured
+        fully by the refined pose.
+        """
+        limit = self.config.plane_refinement.clear_information
+        info = refined.information_scaled
+        if not limit > 0:
+            return degeneracy, info
+        w, V = np.linalg.eigh(0.5 * (refined.information + refined.information.T))
+        keep = w < limit
+        if keep.all():
+            return degeneracy, info
+        self.counters["directions_cleared"] += int((~keep).sum())
+        rows = V[:, keep].T @ refined.basis_scaled
+        info = rows.T @ np.diag(w[keep]) @ rows
+        details = {**degeneracy.details, "cleared": int((~keep).sum())}
+        return replace(degeneracy, basis_scaled=rows, details=details), info
 
     def _body_twist(self, fused) -> np.ndarray:
         """(v, w) of base_link in base_link from the fused velocity and the pose change."""

@@ -80,6 +80,10 @@ class PlaneRefinementConfig:
             along-track refinement [m]; default 0.01.
         min_along_information: the along-track refinement is used only when its information
             is at least this [1/m^2] (default 100: a 10 cm sigma).
+        clear_information: a detected direction along which the refinement's information is
+            at least this [1/m^2] is measured by the refined pose like a constrained one and
+            removed from the degenerate subspace (default 2500: a 2 cm sigma, the configured
+            LiDAR translation sigma); 0 = never.
     """
 
     enabled: bool = True
@@ -97,6 +101,7 @@ class PlaneRefinementConfig:
     along_track: bool = True
     min_travel_m: float = 0.01
     min_along_information: float = 100.0
+    clear_information: float = 2500.0
 
     def validate(self, prefix: str = "plane_refinement.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -118,6 +123,7 @@ class PlaneRefinementConfig:
         check_range(prefix + "max_step", self.max_step, 0.0, 100.0, lo_open=True, unit="m")
         check_range(prefix + "min_travel_m", self.min_travel_m, 0.0, 100.0, unit="m")
         check_range(prefix + "min_along_information", self.min_along_information, 0.0, 1e12)
+        check_range(prefix + "clear_information", self.clear_information, 0.0, 1e12)
 
 
 @dataclass
