@@ -7,8 +7,8 @@ Each bag is run by ``lili`` with every configuration (``default`` = the built-in
 ``config/point_to_point_only.yaml`` switches off the perturbation cap, the point-to-plane
 refinements, the LiDAR's information inside the detected subspace and the wheel scale from
 partially constrained registrations), and, when the suite's peer runners are importable
-(``lili_odom.suite.peers``), by the named peers. Runs go to ``OUT/runs/<bag>_<config>`` and are
-reused with ``--reuse``. Reported per run: ATE (evo, SE(3)-aligned translation RMSE) and its
+(``lili_odom.suite.peers``), by the named peers. Runs go to ``RUNS/<bag>_<config>`` (default
+``data/fusion_generalisation``) and are reused with ``--reuse``. Reported per run: ATE (evo, SE(3)-aligned translation RMSE) and its
 share of the distance travelled, the fraction of scans with a degenerate subspace over the
 whole run and over the first ``--start-m`` metres of travel (the feature-rich start of the
 building; the standalone detector finds dimension 0 there), and the online wheel scale after
@@ -112,6 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--start-m", type=float, default=20.0,
                     help="travel [m] counted as the start of each run")
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    ap.add_argument("--runs", type=Path, default=ROOT / "data" / "fusion_generalisation")
     ap.add_argument("--reuse", action="store_true")
     args = ap.parse_args(argv)
     kinds = dict(k.split("=", 1) for k in args.kind)
@@ -127,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
         for config in args.configs:
             label = _label(config)
             print(f"{name}: lili {label} ...", flush=True)
-            entry[label] = run_ours(bag, config, args.out / "runs" / f"{name}_{label}",
+            entry[label] = run_ours(bag, config, args.runs / f"{name}_{label}",
                                     args.reuse, args.start_m)
             print(f"  {entry[label]}", flush=True)
             result_file.write_text(json.dumps(results, indent=1) + "\n")

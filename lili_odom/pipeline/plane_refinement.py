@@ -12,9 +12,8 @@ put. This module measures what the LiDAR does know along the detected subspace:
 2. associate each scan point with its ``normal_neighbors`` nearest local-map points (scipy
    ``cKDTree`` of the map KISS-ICP keeps), fit a plane to them by PCA (normal = eigenvector of
    the smallest eigenvalue) and form the point-to-plane residual ``r = n . (T p - c)``;
-3. take a few damped Gauss-Newton steps in the subspace coordinates ``c`` only
-   (``T exp(S^-1 B^T c)``), re-associating at each step; the other components stay at the
-   registration's optimum;
+3. take a few damped Gauss-Newton steps on those planes in the subspace coordinates ``c``
+   only (``T exp(S^-1 B^T c)``); the other components stay at the registration's optimum;
 4. report the Gauss-Newton information of the subspace coordinates at the result,
    ``H = sum w_i J_i^T J_i / sigma^2`` with ``J_i = [n_b, p x n_b] S^-1 B^T``, where
    ``sigma`` is the robust scatter of the residuals (floored at ``min_point_sigma``) and the
@@ -52,8 +51,8 @@ class PlaneRefinementConfig:
     """Attributes:
         enabled: refine degenerate registrations in their subspace and give the fusion the
             LiDAR's information there (False: the subspace is left to wheels and IMU).
-        iterations: Gauss-Newton steps (each re-associates the points); default 3.
-        points: scan points used (evenly thinned from the 0.5-voxel frame); default 6000.
+        iterations: Gauss-Newton steps on the planes found at the start pose; default 3.
+        points: scan points used (evenly thinned from the 0.5-voxel frame); default 4000.
         normal_neighbors: local-map points per plane fit (PCA); default 10.
         max_neighbor_distance: a plane fit whose farthest neighbour is farther than this from
             the point is not used [m]; default 1.5.
@@ -88,7 +87,7 @@ class PlaneRefinementConfig:
 
     enabled: bool = True
     iterations: int = 3
-    points: int = 6000
+    points: int = 4000
     normal_neighbors: int = 10
     max_neighbor_distance: float = 1.5
     min_planarity: float = 0.3
@@ -243,38 +242,39 @@ def refine_in_subspace(
         return empty("too few points")
     to_twist = np.linalg.inv(geometry.scaling_matrix(length)) @ B.T  # c -> plain body twist
     min_used = max(10, 2 * kdim)
-    H = np.zeros((kdim, kdim))
-    sigma, used = cfg.min_point_sigma, 0
+    # one association at the start pose: the planes stay fixed while the pose moves inside
+    # the subspace (steps are bounded by max_step, the planes are local surfaces)
+    q = pts @ pose[:3, :3].T + pose[:3, 3]
+    valid, normals, centroids, tilt_var = _planes(reference, q, cfg.normal_neighbors,
+                                                  cfg.max_neighbor_distance, cfg.min_planarity)
+    valid &= np.abs(np.einsum("ij,ij->i", normals, q - centroids)) <= cfg.max_residual
+    used = int(valid.sum())
+    if used < min_used:
+        return empty("too few plane correspondences", used)
+    p_used, n_used, c_used, var_used = pts[valid], normals[valid], centroids[valid], tilt_var[valid]
     for it in range(cfg.iterations + 1):
         R, t = pose[:3, :3], pose[:3, 3]
-        q = pts @ R.T + t
-        valid, normals, centroids, tilt_var = _planes(reference, q, cfg.normal_neighbors,
-                                            cfg.max_neighbor_distance, cfg.min_planarity)
-        r = np.einsum("ij,ij->i", normals, q - centroids)
-        valid &= np.abs(r) <= cfg.max_residual
-        used = int(valid.sum())
-        if used < min_used:
-            return empty("too few plane correspondences", used)
-        r = r[valid]
-        p_used = pts[valid]
-        J = plane_jacobians(p_used, normals[valid] @ R) @ to_twist  # (m, k)
+        r = np.einsum("ij,ij->i", n_used, p_used @ R.T + t - c_used)
+        J = plane_jacobians(p_used, n_used @ R) @ to_twist  # (m, k)
         w = 1.0 / (1.0 + (r / cfg.kernel) ** 2)
         JW = J * w[:, None]
         H = JW.T @ J
-        if cfg.debias:
-            H = _debiased(H, p_used, to_twist, w * tilt_var[valid])
-        sigma = max(cfg.min_point_sigma, 1.4826 * float(np.median(np.abs(r))))
         if it == cfg.iterations:
             break
-        g = JW.T @ r
         # damping: a prior of one point's weight keeps directions the planes do not see put
-        step = -np.linalg.solve(H + np.eye(kdim), g)
+        step = -np.linalg.solve(H + np.eye(kdim), JW.T @ r)
         n = float(np.linalg.norm(step))
         if n > cfg.max_step:
             step *= cfg.max_step / n
         pose = geometry.orthonormalize(pose @ geometry.exp(to_twist @ step))
         if n < 1e-4:
+            r = np.einsum("ij,ij->i", n_used, p_used @ pose[:3, :3].T + pose[:3, 3] - c_used)
+            w = 1.0 / (1.0 + (r / cfg.kernel) ** 2)
+            H = (J * w[:, None]).T @ J
             break
+    if cfg.debias:
+        H = _debiased(H, p_used, to_twist, w * var_used)
+    sigma = max(cfg.min_point_sigma, 1.4826 * float(np.median(np.abs(r))))
     info = cfg.independent_fraction * H / sigma**2
     info = 0.5 * (info + info.T)
     return PlaneRefinement(pose, info, B.T @ info @ B, B, used, sigma,
