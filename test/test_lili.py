@@ -222,3 +222,50 @@ def test_return_check_in_the_node_parameter_table():
     cfg.pipeline.lili.return_check_iterations = 0
     with pytest.raises(ValueError, match="pipeline.lili.return_check_iterations"):
         cfg.validate()
+
+
+def _box_surfaces(centre, size, step, rng) -> np.ndarray:
+    """Points on the six faces of an axis-aligned box [m], 1 cm noise."""
+    centre, size = np.asarray(centre, float), np.asarray(size, float)
+    faces = []
+    for ax in range(3):
+        o = [a for a in range(3) if a != ax]
+        U, V = np.meshgrid(np.arange(-size[o[0]] / 2, size[o[0]] / 2, step),
+                           np.arange(-size[o[1]] / 2, size[o[1]] / 2, step))
+        for sign in (-1, 1):
+            P = np.zeros((U.size, 3))
+            P[:, o[0]], P[:, o[1]], P[:, ax] = U.ravel(), V.ravel(), sign * size[ax] / 2
+            faces.append(P + centre)
+    P = np.vstack(faces)
+    return P + rng.normal(0.0, 0.01, P.shape)
+
+
+def _hall(step: float, seed: int) -> np.ndarray:
+    """A 30 x 20 x 4 m hall with crates and pillars, in the frame of a sensor 0.7 m up."""
+    rng = np.random.default_rng(seed)
+    parts = [_box_surfaces((0, 0, 2.0), (30, 20, 4), step, rng)]
+    parts += [_box_surfaces(c, (1.5, 2.5, 1.5), step, rng)
+              for c in ((4, 3, 0.75), (-6, -4, 0.75), (8, -5, 0.75), (-3, 6, 0.75))]
+    parts += [_box_surfaces((x, y, 2.0), (0.4, 0.4, 4.0), step, rng)
+              for x, y in ((2, -2), (-5, 2), (7, 4))]
+    return np.vstack(parts) - np.array([0.0, 0.0, 0.7])
+
+
+def test_a_young_sparse_map_does_not_make_a_constrained_hall_degenerate():
+    """The odometry's local map after one scan: 1 m voxels holding points ~0.4 m apart, so
+    ``(k - 1) s`` exceeds the 1 m correspondence gate. Capped at 0.75 of the gate the
+    perturbations come back (dimension 0); uncapped the translations cannot."""
+    reference = ReferenceMap.from_points(_hall(0.4, 0), 1.0, 20)
+    scan = _hall(0.3, 1)
+    assert 4 * reference.spacing > reference.voxel_size  # (k - 1) s beyond the gate
+    capped = LiliDetector(LiliConfig()).detect(reference, scan, np.eye(4))
+    assert capped.ok and capped.dimension == 0
+    assert capped.details["perturbation_m"] == pytest.approx(0.75)
+    uncapped = LiliDetector(LiliConfig(max_perturbation_gate=0.0)).detect(reference, scan,
+                                                                         np.eye(4))
+    assert uncapped.dimension >= 2
+
+
+def test_perturbation_cap_validation():
+    with pytest.raises(ValueError, match="max_perturbation_gate"):
+        LiliConfig(max_perturbation_gate=-1.0)

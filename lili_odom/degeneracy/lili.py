@@ -98,6 +98,13 @@ class LiliConfig:
         return_check_iterations: ICP iterations between two such checks (>= 1); each check
             restarts the native ICP from the pose reached, so fewer iterations per check cost
             Python overhead and more stop later.
+        max_perturbation_gate: the translation perturbation ``(k - 1) s`` is capped at this
+            fraction of the correspondence gate (dimensionless; 0 = no cap), the rotation
+            one with it. KISS-ICP associates a point only within the gate (one voxel), so a
+            perturbation near or beyond it cannot come back whatever the scene, and a young
+            local map (one or two scans, widely spaced points) gives ``(k - 1) s`` of more
+            than a voxel. Default 0.75; a map of the reference's full density
+            (``lili-odom detect``, voxel = 10 spacings) is never capped.
     """
 
     k: int = 5
@@ -114,6 +121,7 @@ class LiliConfig:
     perturbation_iterations: int = 0
     return_ratio: float = 0.0
     return_check_iterations: int = 4
+    max_perturbation_gate: float = 0.75
 
     def __post_init__(self) -> None:
         self.validate()
@@ -136,6 +144,9 @@ class LiliConfig:
         if not 0.0 <= self.return_ratio < self.tau_displacement:
             raise ValueError(f"return_ratio must be in [0, tau_displacement = "
                              f"{self.tau_displacement}), got {self.return_ratio}")
+        if not 0.0 <= self.max_perturbation_gate <= 10.0:
+            raise ValueError(
+                f"max_perturbation_gate must be in [0, 10], got {self.max_perturbation_gate}")
         if self.return_check_iterations < 1:
             raise ValueError(
                 f"return_check_iterations must be >= 1, got {self.return_check_iterations}")
@@ -272,6 +283,9 @@ class LiliDetector:
 
         probe = scan[:: max(1, len(scan) // cfg.ratio_points)]
         moved = thin(scan, cfg.perturbation_points) if cfg.perturbation_points else scan
+        s_raw = s
+        if cfg.max_perturbation_gate > 0.0:  # a perturbation beyond the gate cannot come back
+            s = min(s, cfg.max_perturbation_gate * gate / (cfg.k - 1))
         deltas = perturbation_twists(s, L, cfg.k, cfg.both_signs)
         twists = np.zeros_like(deltas)
         ratios = np.zeros(len(deltas))
@@ -314,7 +328,7 @@ class LiliDetector:
             ratios=ratios,
             kept=kept,
             details={
-                "spacing": s,
+                "spacing": s_raw,
                 "perturbation_m": d,
                 "perturbation_rad": d / L,
                 "valid_runs": int(valid.sum()),

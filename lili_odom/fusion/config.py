@@ -76,6 +76,12 @@ class LidarNoiseConfig:
             axis carrying some would otherwise trade them against the distance. The reported
             covariance adds the wheel random walk along the subspace, which the anchor would
             otherwise hide. 0.05 (default); 0 = no anchor (``config/no_anchor.yaml``).
+        subspace_information: keep the LiDAR's own information inside the detected degenerate
+            subspace (a prior at the registration refined there by point-to-plane
+            Gauss-Newton, weighted by its Hessian; :mod:`lili_odom.pipeline.plane_refinement`)
+            instead of leaving the subspace to the wheels and the IMU alone. Default True.
+        subspace_min_information: the subspace factor is dropped when its largest eigenvalue
+            is below this [1/m^2, scaled twists] (1 = a 1 m sigma). Default 1.
         robust_after_updates: the kernel is off for this many updates after (re)initialisation
             or after an interval whose IMU samples reach 95 % of the sensor range (then the
             velocity is not observed or corrupt, so the IMU prediction cannot be trusted; such
@@ -93,6 +99,8 @@ class LidarNoiseConfig:
     factor: str = "hybrid"
     anchor_sigma: float = 0.05
     basis_snap: float = 0.0
+    subspace_information: bool = True
+    subspace_min_information: float = 1.0
 
     def validate(self, prefix: str = "lidar.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -116,6 +124,8 @@ class LidarNoiseConfig:
             raise ValueError(f"{prefix}factor must be one of {', '.join(LIDAR_FACTORS)}, "
                              f"got {self.factor!r}")
         check_range(prefix + "robust_after_updates", self.robust_after_updates, 0, 100000)
+        check_range(prefix + "subspace_min_information", self.subspace_min_information, 0.0,
+                    1e12)
 
     def information(self) -> np.ndarray:
         """6x6 diagonal information ``(v, w)`` in the LiDAR body frame."""

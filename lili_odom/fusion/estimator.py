@@ -29,13 +29,19 @@ Factors between consecutive states ``i-1 -> i``:
   :mod:`lili_odom.pipeline.remap`). ``"hybrid"`` (default)
   adds the prior restricted to translation and yaw and the between factor restricted to roll
   and pitch.
+* LiDAR subspace factor (optional, ``subspace`` argument of :meth:`FusionEstimator.update`):
+  a ``PriorFactorPose3`` at the registration refined inside the degenerate subspace by
+  point-to-plane Gauss-Newton (:mod:`lili_odom.pipeline.plane_refinement`), whose information
+  is the LiDAR's own (point-to-plane Hessian) information there, capped at the configured
+  LiDAR information. A weakly constrained direction keeps the LiDAR's weight; in a truly
+  degenerate place it is about zero and the wheels and the IMU carry the direction.
 * Wheel ``BetweenFactorPose3`` whose information lives only inside the degenerate subspace
   (the paper's solution remapping, as a factor): by default the wheels' own weighted fit of
   the motion along it (``wheel_restriction``,
   :func:`lili_odom.fusion.subspace.weighted_restriction`), so the roll and pitch they do not
   measure neither weaken nor move it. Without degeneracy there is no wheel factor unless
   ``wheel_weak_scale`` > 0. The increment's distance is first divided by the wheel
-  scale estimated online from fully constrained registrations
+  scale estimated online from registrations that constrain the direction of travel
   (:mod:`lili_odom.fusion.wheel_scale`), since inside the subspace a scale error is drift.
 
 Error convention: GTSAM's ``BetweenFactorPose3`` error is ``Logmap(Z^-1 X(i-1)^-1 X(i))``, a
@@ -87,6 +93,7 @@ from lili_odom.fusion.imu import (
 )
 from lili_odom.fusion.subspace import (
     covariance_along,
+    scaled_lidar_to_base,
     degenerate_anchor,
     inflate_along,
     restrict_information,
@@ -98,7 +105,7 @@ from lili_odom.fusion.wheel import WheelBuffer, wheel_information
 from lili_odom.fusion.wheel_scale import WheelScaleEstimator
 from lili_odom.geometry import exp, log, matrix, orthonormalize
 
-__all__ = ["FusionEstimator", "FusionOutput", "FusionStats"]
+__all__ = ["FusionEstimator", "FusionOutput", "FusionStats", "SubspaceMeasurement"]
 
 # base_link roll and pitch (rows of the (v, w) identity) and the other four directions
 _TILT = np.eye(6)[[3, 4]]
@@ -195,6 +202,23 @@ class FusionOutput:
     used_wheel: bool = False
     notes: list[str] = field(default_factory=list)
     gravity_tilt: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+
+@dataclass
+class SubspaceMeasurement:
+    """The LiDAR's own measurement inside the detected degenerate subspace.
+
+    Attributes:
+        pose: 4x4 pose of base_link in the odometry frame (the registration refined inside
+            the subspace).
+        information_scaled: 6x6 information over scaled LiDAR body twists ``(v, L w)``
+            [1/m^2], supported on the subspace.
+        length: characteristic length L [m] of the scaling.
+    """
+
+    pose: np.ndarray
+    information_scaled: np.ndarray
+    length: float
 
 
 @dataclass
@@ -398,6 +422,7 @@ class FusionEstimator:
         wheel_delta: np.ndarray | None = None,
         lidar_information: np.ndarray | None = None,
         wheel_info: np.ndarray | None = None,
+        subspace: SubspaceMeasurement | None = None,
     ) -> FusionOutput | None:
         """Add the state at scan stamp ``t`` and return the fused estimate.
 
@@ -414,6 +439,9 @@ class FusionEstimator:
                 frame (e.g. from the ICP Hessian). None: from ``config.lidar``.
             wheel_info: 6x6 ``(v, w)`` information of the wheel increment in base_link. None:
                 from ``config.wheel``.
+            subspace: the LiDAR's measurement inside the degenerate subspace (refined pose
+                and its information), used only with a valid ``T_icp`` and a non-empty
+                subspace (``lidar.subspace_information``).
 
         Returns:
             The fused output, or None when the update was rejected (bad stamp or solver
@@ -525,6 +553,8 @@ class FusionEstimator:
                 mode=cfg.lidar.restriction,
             )
 
+        sub_pose, sub_info = self._subspace_factor(subspace, T_meas, basis, notes)
+
         # Absolute LiDAR prior: its degenerate components come from the wheel prediction
         lidar_target, lidar_info, walk_step = T_meas, split.lidar, None
         if (split.lidar is not None and cfg.lidar.factor != "between" and split.dimension
@@ -622,6 +652,11 @@ class FusionEstimator:
                 else:
                     Z = orthonormalize(np.linalg.inv(T_prev) @ T_meas)
                     graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(Z), noise))
+            if used_lidar and sub_info is not None:
+                sub_noise = _noise_from_information(sub_info)
+                if kernel is not None:
+                    sub_noise = gtsam.noiseModel.Robust.Create(kernel, sub_noise)
+                graph.add(gtsam.PriorFactorPose3(X(i), gtsam.Pose3(sub_pose), sub_noise))
             used_wheel = split.wheel is not None and delta_w is not None
             if used_wheel:
                 graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(delta_w),
@@ -660,15 +695,19 @@ class FusionEstimator:
                                            self.T_base_lidar)
         else:
             self._anchor_walk = 0.0
-        # the wheel scale is calibrated on chains of consecutive, fully constrained
-        # registrations (not on the fused poses, which lag them by the fusion's compromise)
-        constrained = (T_meas is not None and not len(basis) and out.used_lidar
-                       and raw_wheel is not None)
-        if constrained and self._last_meas is not None and self._last_meas[0] == i - 1:
-            self.wheel_scale.observe(raw_wheel, np.linalg.inv(self._last_meas[1]) @ T_meas)
+        # the wheel scale is calibrated on chains of consecutive registrations that constrain
+        # the direction of travel (not on the fused poses, which lag them by the fusion's
+        # compromise)
+        T_scale = None
+        if T_meas is not None and out.used_lidar and raw_wheel is not None:
+            T_scale = self._scale_measurement(T_meas, raw_wheel, split.lidar, basis, sub_pose,
+                                              sub_info)
+        if (T_scale is not None and self._last_meas is not None
+                and self._last_meas[0] == i - 1):
+            self.wheel_scale.observe(raw_wheel, np.linalg.inv(self._last_meas[1]) @ T_scale)
         else:
             self.wheel_scale.interrupt()
-        self._last_meas = (i, T_meas) if constrained else None
+        self._last_meas = (i, T_scale) if T_scale is not None else None
         if dt >= 0.01:  # shorter intervals turn registration noise into absurd rates
             rate = log(np.linalg.inv(T_prev) @ out.pose) / dt
             # the constant-velocity fallback never extrapolates faster than the plausibility gates
@@ -685,6 +724,69 @@ class FusionEstimator:
         if self._since_reset >= max(1, cfg.reset_every):
             self._reset()
         return out
+
+    def _subspace_factor(self, subspace: SubspaceMeasurement | None, T_meas: np.ndarray | None,
+                         basis: np.ndarray, notes: list[str]
+                         ) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """(pose, base_link ``(v, w)`` information) of the LiDAR subspace factor, or Nones.
+
+        The information is mapped from scaled LiDAR twists to base_link, its eigenvalues
+        capped at the configured LiDAR information's largest in the scaled space (the
+        subspace never claims more than a well-constrained direction) and dropped when its
+        largest is below ``lidar.subspace_min_information``.
+        """
+        cfg = self.config.lidar
+        if subspace is None or not cfg.subspace_information or T_meas is None or not len(basis):
+            return None, None
+        pose = _as_pose(getattr(subspace, "pose", None))
+        try:
+            info = np.asarray(subspace.information_scaled, dtype=float)
+            length = float(subspace.length)
+        except (AttributeError, TypeError, ValueError):
+            info, length = np.full((6, 6), np.nan), math.nan
+        if (pose is None or info.shape != (6, 6) or not _finite(info)
+                or not (math.isfinite(length) and 1e-3 <= length <= 1e6)):
+            self.stats.n_rejected_lidar_information += 1
+            notes.append("LiDAR subspace measurement rejected")
+            return None, None
+        w, v = np.linalg.eigh(0.5 * (info + info.T))
+        S_inv = np.diag([1.0, 1.0, 1.0, 1.0 / length, 1.0 / length, 1.0 / length])
+        nominal = float(np.linalg.eigvalsh(S_inv @ cfg.information() @ S_inv).max())
+        w = np.clip(w, 0.0, nominal)
+        if not w.max() >= cfg.subspace_min_information:
+            return None, None
+        Minv = np.linalg.inv(scaled_lidar_to_base(self.T_base_lidar, length))
+        base = Minv.T @ ((v * w) @ v.T) @ Minv
+        return pose, 0.5 * (base + base.T)
+
+    def _scale_measurement(self, T_meas: np.ndarray, wheel: np.ndarray,
+                           lidar_info: np.ndarray | None, basis: np.ndarray,
+                           sub_pose: np.ndarray | None, sub_info: np.ndarray | None
+                           ) -> np.ndarray | None:
+        """The LiDAR pose the wheel scale may compare the wheels with, or None.
+
+        Without a degenerate subspace, the registration. With one, the subspace-refined
+        registration when the LiDAR's information (kept part plus subspace factor) holds the
+        wheels' direction of travel to ``wheel_scale.max_lidar_sigma`` (marginal 1-sigma
+        along it); else None (the registration's components along the subspace are the
+        wheels' own prediction).
+        """
+        if not len(basis):
+            return T_meas
+        limit = self.config.wheel_scale.max_lidar_sigma
+        if sub_pose is None or sub_info is None or lidar_info is None or not limit > 0:
+            return None
+        d = np.asarray(wheel, dtype=float)[:3, 3]
+        n = float(np.linalg.norm(d))
+        if not n > 1e-3:
+            return None
+        u = np.concatenate([d / n, np.zeros(3)])
+        total = 0.5 * (lidar_info + lidar_info.T) + sub_info
+        try:
+            var = float(u @ np.linalg.solve(total, u))
+        except np.linalg.LinAlgError:
+            return None
+        return sub_pose if 0.0 <= var <= limit * limit else None
 
     @property
     def gravity_tilt(self) -> np.ndarray:

@@ -11,6 +11,12 @@ LiDAR measures the same motion far better than the wheels; this module estimates
 over the recent non-degenerate travel and divides the translation of every wheel increment
 by it before the increment enters the graph.
 
+Which registrations count: fully constrained ones, and those with a degenerate subspace whose
+LiDAR information (what the registration keeps plus the LiDAR's own information inside the
+subspace, :mod:`lili_odom.pipeline.plane_refinement`) still holds the direction of travel to
+``max_lidar_sigma``; the latter are compared through the pose refined inside the subspace,
+never through the registration held at the wheels' prediction there.
+
 The LiDAR side is not compared increment by increment: a registration is a few centimetres
 off along a weakly constrained axis, which at 10 cm per scan makes single-increment ratios
 swing between 0.6 and 3, and any gate on them biases the estimate by percents. Instead
@@ -74,6 +80,10 @@ class WheelScaleConfig:
         max_rejections: that many rejected segments in a row restart the estimate.
         robust_ratio: Huber threshold on a segment's ratio's deviation from the estimate
             (dimensionless; 0.015 = 1.5 %); 0 = plain distance-weighted mean.
+        max_lidar_sigma: an increment whose registration has a degenerate subspace is still
+            chained when the LiDAR (the kept information plus its own information inside the
+            subspace) holds the wheels' direction of travel to this 1-sigma [m]; 0 = only
+            fully constrained registrations are chained. Default 0.03.
     """
 
     enabled: bool = True
@@ -89,6 +99,7 @@ class WheelScaleConfig:
     slip_gate_ratio: float = 0.03
     max_rejections: int = 3
     robust_ratio: float = 0.015
+    max_lidar_sigma: float = 0.03
 
     def validate(self, prefix: str = "wheel_scale.") -> None:
         from lili_odom.errors import check_range
@@ -106,6 +117,7 @@ class WheelScaleConfig:
         check_range(prefix + "slip_gate_ratio", self.slip_gate_ratio, 0.0, 10.0)
         check_range(prefix + "max_rejections", self.max_rejections, 1, 1000)
         check_range(prefix + "robust_ratio", self.robust_ratio, 0.0, 1.0)
+        check_range(prefix + "max_lidar_sigma", self.max_lidar_sigma, 0.0, 10.0, unit="m")
 
 
 class _Segment:

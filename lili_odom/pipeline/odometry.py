@@ -11,9 +11,14 @@ measured offline is what runs on the robot. Per scan (``process_scan``):
 4. the selected detector (``lili`` | ``zhang`` | ``hessian`` | ``none``) finds the degenerate
    subspace of that registration, reusing the ICP optimum, unless a detection of the last
    scans nearby can be carried over (:mod:`lili_odom.pipeline.detection_schedule`);
-5. iSAM2 fuses IMU preintegration, the LiDAR increment with the degenerate directions removed
-   and the wheel increment only inside them (``FusionEstimator``);
-6. the local map is updated with the FUSED pose.
+5. on a degenerate scan the registration is held at the wheels' prediction along the subspace
+   (solution remapping, :mod:`lili_odom.pipeline.remap`) and then refined inside the subspace
+   by point-to-plane Gauss-Newton, which measures what the LiDAR still knows there
+   (:mod:`lili_odom.pipeline.plane_refinement`);
+6. iSAM2 fuses IMU preintegration, the LiDAR registration with the degenerate directions
+   removed, the LiDAR's own (Hessian-weighted) measurement inside them and the wheel
+   increment only inside them (``FusionEstimator``);
+7. the local map is updated with the FUSED pose.
 
 Frames: the odometry frame is gravity-aligned at the first scan; poses are of base_link in it.
 Scan poses refer to the time of the scan's last point (KISS-ICP deskews to it).
@@ -23,7 +28,7 @@ from __future__ import annotations
 import logging
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -33,8 +38,9 @@ from lili_odom.degeneracy.lili import LiliConfig, LiliDetector
 from lili_odom.degeneracy.result import DegeneracyResult
 from lili_odom.errors import ThrottledWarnings
 from lili_odom.fusion.config import FusionConfig
-from lili_odom.fusion.estimator import FusionEstimator
+from lili_odom.fusion.estimator import FusionEstimator, SubspaceMeasurement
 from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionScheduleConfig
+from lili_odom.pipeline.plane_refinement import PlaneRefinementConfig, refine_in_subspace
 from lili_odom.pipeline.remap import constrained_registration
 from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig
 from lili_odom.pipeline.types import ImuSample, OdometryOutput, Scan, WheelSample
@@ -72,6 +78,8 @@ class PipelineConfig:
             ``hybrid`` or ``prior``): without it the registration's slide along the axis
             leaks into the kept components and pins the axial position to the slide
             (``benchmarks/lidar_factor.py``).
+        plane_refinement: the point-to-plane refinement inside a detected subspace whose
+            information the fusion keeps (``fusion.lidar.subspace_information``).
         scan_matcher / fusion / lili / zhang / hessian: the stages' own configurations; in
             the odometry LiLi stops a perturbed re-registration once it has come back
             (``lili.return_ratio`` 0.1, README, Speed), the standalone detector
@@ -88,6 +96,7 @@ class PipelineConfig:
     max_pending_scans: int = 3
     remap_iterations: int = 10
     detection_schedule: DetectionScheduleConfig = field(default_factory=DetectionScheduleConfig)
+    plane_refinement: PlaneRefinementConfig = field(default_factory=PlaneRefinementConfig)
     scan_matcher: ScanMatcherConfig = field(default_factory=ScanMatcherConfig)
     fusion: FusionConfig = field(default_factory=FusionConfig)
     lili: LiliConfig = field(default_factory=lambda: LiliConfig(return_ratio=0.1))
@@ -112,6 +121,7 @@ class PipelineConfig:
         if not 0 <= self.remap_iterations <= 100:
             raise ValueError(f"remap_iterations must be in [0, 100], got {self.remap_iterations}")
         self.detection_schedule.validate()
+        self.plane_refinement.validate()
         self.scan_matcher.validate()
         self.lili.validate()
 
@@ -354,6 +364,39 @@ class OdometryPipeline:
         timings["remap"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
+        subspace = None
+        refine = self.config.plane_refinement
+        if (refine.enabled and self.config.fusion.lidar.subspace_information and reg.ok
+                and degeneracy is not None and degeneracy.ok and degeneracy.degenerate):
+            refined = refine_in_subspace(map_points, self._matcher.reference, measured,
+                                         degeneracy.basis_scaled,
+                                         degeneracy.characteristic_length, refine)
+            if refined.ok:
+                degeneracy, info = self._clear_held_directions(degeneracy, refined)
+                measured = refined.pose
+                if degeneracy.degenerate:
+                    subspace = SubspaceMeasurement(refined.pose @ np.linalg.inv(T_bl), info,
+                                                   degeneracy.characteristic_length)
+            else:
+                self.counters["refinement_failures"] += 1
+        elif (refine.enabled and refine.along_track and reg.ok and not first
+              and self._last_output is not None
+              and (degeneracy is None or (degeneracy.ok and not degeneracy.degenerate))):
+            # constrained (or no detector): point-to-point's sensor-fixed sampling pattern
+            # drags the registration back along the direction of travel; point-to-plane
+            # along that one direction removes the drag
+            previous = self._last_output.pose @ T_bl
+            travel = reg.pose[:3, :3].T @ (guess[:3, 3] - previous[:3, 3])
+            if np.linalg.norm(travel) >= refine.min_travel_m:
+                direction = np.concatenate([travel / np.linalg.norm(travel), np.zeros(3)])
+                refined = refine_in_subspace(map_points, self._matcher.reference, reg.pose,
+                                             direction[None, :], 1.0, refine)
+                if refined.ok and refined.information[0, 0] >= refine.min_along_information:
+                    measured = refined.pose
+                    self.counters["along_track_refined"] += 1
+        timings["refine"] = time.perf_counter() - t0
+
+        t0 = time.perf_counter()
         if first and reinit_pose is not None:
             start = reg.pose @ np.linalg.inv(T_bl) if reg.ok else reinit_pose
             fused = est.initialize(t_ref, pose=start)
@@ -361,7 +404,7 @@ class OdometryPipeline:
             fused = est.last_output
         else:
             T_icp_base = measured @ np.linalg.inv(T_bl) if reg.ok else None
-            fused = est.update(t_ref, T_icp_base, degeneracy)
+            fused = est.update(t_ref, T_icp_base, degeneracy, subspace=subspace)
         timings["fusion"] = time.perf_counter() - t0
         if fused is None:
             self._skip("fusion_rejected", "the estimator rejected the update at %.3f (%s)", t_ref,
@@ -398,6 +441,31 @@ class OdometryPipeline:
         self._last_output = out
         self.counters["processed"] += 1
         return out
+
+    def _clear_held_directions(self, degeneracy: DegeneracyResult, refined
+                               ) -> tuple[DegeneracyResult, np.ndarray]:
+        """The detection without the directions point-to-plane holds as well as a
+        well-constrained one (information >= ``plane_refinement.clear_information``), and the
+        subspace information (scaled, 6x6) of the directions left.
+
+        Point-to-point LiLi flags a direction whose perturbations do not come back; in a young
+        local map, whose sampling pattern moved with the sensor, that happens along the
+        direction of travel in a well-constrained hall too. Such a direction is measured
+        fully by the refined pose.
+        """
+        limit = self.config.plane_refinement.clear_information
+        info = refined.information_scaled
+        if not limit > 0:
+            return degeneracy, info
+        w, V = np.linalg.eigh(0.5 * (refined.information + refined.information.T))
+        keep = w < limit
+        if keep.all():
+            return degeneracy, info
+        self.counters["directions_cleared"] += int((~keep).sum())
+        rows = V[:, keep].T @ refined.basis_scaled
+        info = rows.T @ np.diag(w[keep]) @ rows
+        details = {**degeneracy.details, "cleared": int((~keep).sum())}
+        return replace(degeneracy, basis_scaled=rows, details=details), info
 
     def _body_twist(self, fused) -> np.ndarray:
         """(v, w) of base_link in base_link from the fused velocity and the pose change."""

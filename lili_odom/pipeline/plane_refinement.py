@@ -1,0 +1,281 @@
+"""Point-to-plane refinement of a registration inside its detected degenerate subspace.
+
+A direction LiLi flags (point-to-point ICP does not come back along it) is not necessarily
+one the scene says nothing about: in a corridor whose end walls are within range, or past a
+few door recesses, the points on surfaces facing the axis fix the position along it to
+centimetres, while the many points on the side walls, floor and ceiling (whose point-to-point
+residuals have a tangential part) hold a perturbed point-to-point registration where it was
+put. This module measures what the LiDAR does know along the detected subspace:
+
+1. start from the registration whose degenerate components are the prediction's (solution
+   remapping, :mod:`lili_odom.pipeline.remap`);
+2. associate each scan point with its ``normal_neighbors`` nearest local-map points (scipy
+   ``cKDTree`` of the map KISS-ICP keeps), fit a plane to them by PCA (normal = eigenvector of
+   the smallest eigenvalue) and form the point-to-plane residual ``r = n . (T p - c)``;
+3. take a few damped Gauss-Newton steps on those planes in the subspace coordinates ``c``
+   only (``T exp(S^-1 B^T c)``); the other components stay at the registration's optimum;
+4. report the Gauss-Newton information of the subspace coordinates at the result,
+   ``H = sum w_i J_i^T J_i / sigma^2`` with ``J_i = [n_b, p x n_b] S^-1 B^T``, where
+   ``sigma`` is the robust scatter of the residuals (floored at ``min_point_sigma``) and the
+   sum is scaled by ``independent_fraction`` (neighbouring residuals share the map's and the
+   scan's errors, so they are not independent measurements).
+
+In a featureless tube or between two parallel walls the normals are perpendicular to the
+axis, ``H`` is about zero and the fusion leaves the axis to the wheels and the IMU; with end
+walls in range ``H`` is large and the LiDAR keeps holding the axis.
+
+This is not a registration of its own: KISS-ICP's point-to-point ICP remains the
+registration, and the refinement only moves the pose inside the (usually one-dimensional)
+subspace it could not fix.
+
+Frames and units: scan points (N, 3) in the LiDAR frame [m]; poses ``T_odom_lidar`` 4x4 [m];
+``basis_scaled`` rows are scaled LiDAR body twists ``(v, L w)`` (:mod:`lili_odom.degeneracy.result`);
+the returned information is (k, k) over the subspace coordinates ``c`` [1/m^2] and
+(6, 6) over scaled LiDAR body twists ``(v, L w)``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lili_odom import geometry
+from lili_odom.degeneracy.reference import ReferenceMap
+from lili_odom.degeneracy.subspace import orthonormal_rows
+
+__all__ = ["PlaneRefinementConfig", "PlaneRefinement", "plane_jacobians", "refine_in_subspace"]
+
+
+@dataclass
+class PlaneRefinementConfig:
+    """Attributes:
+        enabled: refine degenerate registrations in their subspace and give the fusion the
+            LiDAR's information there (False: the subspace is left to wheels and IMU).
+        iterations: Gauss-Newton steps on the planes found at the start pose; default 3.
+        points: scan points used (evenly thinned from the 0.5-voxel frame); default 4000.
+        normal_neighbors: local-map points per plane fit (PCA); default 10.
+        max_neighbor_distance: a plane fit whose farthest neighbour is farther than this from
+            the point is not used [m]; default 1.5.
+        min_planarity: plane fits with ``(l2 - l3) / l1`` below this (eigenvalues of the
+            neighbourhood covariance, descending) are not used (dimensionless); default 0.3.
+        max_residual: correspondences with a point-to-plane residual above this are not used
+            [m]; default 0.3.
+        kernel: Cauchy kernel width on the residuals [m]; default 0.05.
+        min_point_sigma: floor of the residual 1-sigma used for the information [m];
+            default 0.03.
+        independent_fraction: fraction of the used points counted as independent
+            measurements in the information (0..1); default 0.05.
+        max_step: largest Gauss-Newton step in the subspace [m, scaled]; default 0.3.
+        debias: subtract the expected contribution of the plane fits' normal noise from the
+            information (``_debiased``); default True.
+        along_track: on a scan without a degenerate subspace, refine the registration along
+            its direction of travel (the predicted translation since the previous scan) and
+            use that as the LiDAR measurement. Point-to-point ICP against a local map built
+            from a moving sensor's scans is pulled back towards the earlier poses along the
+            direction of travel (ring and column patterns are fixed to the sensor), most on a
+            young map and in corridors; point-to-plane residuals do not have that pull.
+            Default True.
+        min_travel_m: predicted travel since the previous scan below which there is no
+            along-track refinement [m]; default 0.01.
+        min_along_information: the along-track refinement is used only when its information
+            is at least this [1/m^2] (default 100: a 10 cm sigma).
+        clear_information: a detected direction along which the refinement's information is
+            at least this [1/m^2] is measured by the refined pose like a constrained one and
+            removed from the degenerate subspace (default 2500: a 2 cm sigma, the configured
+            LiDAR translation sigma); 0 = never.
+    """
+
+    enabled: bool = True
+    iterations: int = 3
+    points: int = 4000
+    normal_neighbors: int = 10
+    max_neighbor_distance: float = 1.5
+    min_planarity: float = 0.3
+    max_residual: float = 0.3
+    kernel: float = 0.05
+    min_point_sigma: float = 0.03
+    independent_fraction: float = 0.05
+    max_step: float = 0.3
+    debias: bool = True
+    along_track: bool = True
+    min_travel_m: float = 0.01
+    min_along_information: float = 100.0
+    clear_information: float = 2500.0
+
+    def validate(self, prefix: str = "plane_refinement.") -> None:
+        """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
+        from lili_odom.errors import check_range
+
+        check_range(prefix + "iterations", self.iterations, 0, 100)
+        check_range(prefix + "points", self.points, 10, 10_000_000)
+        check_range(prefix + "normal_neighbors", self.normal_neighbors, 3, 100)
+        check_range(prefix + "max_neighbor_distance", self.max_neighbor_distance, 0.0, 100.0,
+                    lo_open=True, unit="m")
+        check_range(prefix + "min_planarity", self.min_planarity, 0.0, 1.0)
+        check_range(prefix + "max_residual", self.max_residual, 0.0, 100.0, lo_open=True,
+                    unit="m")
+        check_range(prefix + "kernel", self.kernel, 0.0, 100.0, lo_open=True, unit="m")
+        check_range(prefix + "min_point_sigma", self.min_point_sigma, 0.0, 10.0, lo_open=True,
+                    unit="m")
+        check_range(prefix + "independent_fraction", self.independent_fraction, 0.0, 1.0,
+                    lo_open=True)
+        check_range(prefix + "max_step", self.max_step, 0.0, 100.0, lo_open=True, unit="m")
+        check_range(prefix + "min_travel_m", self.min_travel_m, 0.0, 100.0, unit="m")
+        check_range(prefix + "min_along_information", self.min_along_information, 0.0, 1e12)
+        check_range(prefix + "clear_information", self.clear_information, 0.0, 1e12)
+
+
+@dataclass
+class PlaneRefinement:
+    """Attributes:
+        pose: 4x4 refined ``T_odom_lidar`` (the input pose moved inside the subspace).
+        information: (k, k) information of the subspace coordinates [1/m^2].
+        information_scaled: (6, 6) the same over scaled LiDAR body twists (supported on the
+            subspace).
+        basis_scaled: (k, 6) orthonormal subspace rows the coordinates refer to.
+        points_used: correspondences in the last information.
+        sigma: residual 1-sigma used [m].
+        ok: False when too few correspondences were found (pose = the input, information 0).
+    """
+
+    pose: np.ndarray
+    information: np.ndarray
+    information_scaled: np.ndarray
+    basis_scaled: np.ndarray
+    points_used: int = 0
+    sigma: float = float("nan")
+    ok: bool = True
+    details: dict = field(default_factory=dict)
+
+
+def plane_jacobians(points: np.ndarray, normals_body: np.ndarray) -> np.ndarray:
+    """(N, 6) derivatives of point-to-plane residuals by a body twist ``(v, w)`` of the pose.
+
+    ``r(xi) = n . (T exp(xi) p - c)``; with ``n_b = R^T n`` (the normal in the body frame)
+    ``dr/dxi = [n_b, p x n_b]``.
+    """
+    return np.hstack([normals_body, np.cross(points, normals_body)])
+
+
+def _planes(reference: ReferenceMap, q: np.ndarray, k: int, max_dist: float,
+            min_planarity: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Plane fits around ``q`` (odometry frame): (valid mask, normals, centroids, normal
+    variances).
+
+    The variance of a fitted normal's tilt [rad^2] is about ``l3 / (k l2)`` (out-of-plane
+    scatter over the in-plane spread of ``k`` points, ``l1 >= l2 >= l3`` the eigenvalues of the
+    neighbourhood covariance)."""
+    pts = reference.points
+    k = min(k, len(pts))
+    dist, idx = reference.kdtree.query(q, k=k, workers=-1)
+    if k == 1:
+        dist, idx = dist[:, None], idx[:, None]
+    valid = np.isfinite(dist[:, -1]) & (dist[:, -1] <= max_dist)
+    normals = np.zeros((len(q), 3))
+    centroids = np.zeros((len(q), 3))
+    tilt_var = np.zeros(len(q))
+    if not valid.any():
+        return valid, normals, centroids, tilt_var
+    nb = pts[idx[valid]]  # (m, k, 3)
+    c = nb.mean(axis=1)
+    d = nb - c[:, None, :]
+    cov = np.einsum("mki,mkj->mij", d, d) / k
+    w, v = np.linalg.eigh(cov)  # ascending
+    planarity = (w[:, 1] - w[:, 0]) / np.maximum(w[:, 2], 1e-12)
+    good = planarity >= min_planarity
+    sel = np.flatnonzero(valid)
+    valid[sel[~good]] = False
+    normals[sel[good]] = v[good, :, 0]
+    centroids[sel[good]] = c[good]
+    tilt_var[sel[good]] = np.maximum(w[good, 0], 0.0) / (k * np.maximum(w[good, 1], 1e-12))
+    return valid, normals, centroids, tilt_var
+
+
+def _debiased(H: np.ndarray, points: np.ndarray, to_twist: np.ndarray,
+              weights: np.ndarray) -> np.ndarray:
+    """``H`` minus what the normals' fitting noise adds to it on average, PSD-clipped.
+
+    A normal ``n + dn`` with an isotropic tilt of variance ``s^2`` adds
+    ``s^2 A^T A`` to ``E[J^T J]`` (``J = n^T A``, ``A = [I, -[p]x] to_twist``): in a featureless
+    tube the noise of the plane fits alone would otherwise claim centimetres along the axis.
+    """
+    Tv, Tw = to_twist[:3], to_twist[3:]
+    # A_i = Tv - [p_i]x Tw  (3, k) for every point: [p]x Tw columns are p x (Tw column)
+    A = Tv[None, :, :] - np.cross(points[:, :, None], Tw[None, :, :], axis=1)
+    noise = np.einsum("m,mik,mil->kl", weights, A, A)
+    out = 0.5 * ((H - noise) + (H - noise).T)
+    w, v = np.linalg.eigh(out)
+    return (v * np.clip(w, 0.0, None)) @ v.T
+
+
+def refine_in_subspace(
+    points: np.ndarray,
+    reference: ReferenceMap,
+    pose: np.ndarray,
+    basis_scaled: np.ndarray,
+    length: float,
+    config: PlaneRefinementConfig | None = None,
+) -> PlaneRefinement:
+    """Point-to-plane Gauss-Newton of ``pose`` restricted to the subspace (module docstring).
+
+    Args:
+        points: (N, 3) scan points in the LiDAR frame [m] (deskewed).
+        reference: the local map (odometry frame).
+        pose: 4x4 start ``T_odom_lidar``.
+        basis_scaled: (k, 6) subspace rows, scaled LiDAR body twists.
+        length: characteristic length L [m] of the scaling.
+    """
+    cfg = config or PlaneRefinementConfig()
+    B = orthonormal_rows(basis_scaled)
+    kdim = B.shape[0]
+    pose = geometry.orthonormalize(np.asarray(pose, dtype=float))
+
+    def empty(reason: str, used: int = 0) -> PlaneRefinement:
+        return PlaneRefinement(pose, np.zeros((kdim, kdim)), np.zeros((6, 6)), B, used,
+                               ok=False, details={"reason": reason})
+
+    if kdim == 0:
+        return PlaneRefinement(pose, np.zeros((0, 0)), np.zeros((6, 6)), B)
+    pts = geometry.drop_nonfinite_rows(np.asarray(points, dtype=float).reshape(-1, 3))
+    pts = pts[:: max(1, -(-len(pts) // cfg.points))]
+    if len(pts) < 10 or len(reference.points) < cfg.normal_neighbors:
+        return empty("too few points")
+    to_twist = np.linalg.inv(geometry.scaling_matrix(length)) @ B.T  # c -> plain body twist
+    min_used = max(10, 2 * kdim)
+    # one association at the start pose: the planes stay fixed while the pose moves inside
+    # the subspace (steps are bounded by max_step, the planes are local surfaces)
+    q = pts @ pose[:3, :3].T + pose[:3, 3]
+    valid, normals, centroids, tilt_var = _planes(reference, q, cfg.normal_neighbors,
+                                                  cfg.max_neighbor_distance, cfg.min_planarity)
+    valid &= np.abs(np.einsum("ij,ij->i", normals, q - centroids)) <= cfg.max_residual
+    used = int(valid.sum())
+    if used < min_used:
+        return empty("too few plane correspondences", used)
+    p_used, n_used, c_used, var_used = pts[valid], normals[valid], centroids[valid], tilt_var[valid]
+    for it in range(cfg.iterations + 1):
+        R, t = pose[:3, :3], pose[:3, 3]
+        r = np.einsum("ij,ij->i", n_used, p_used @ R.T + t - c_used)
+        J = plane_jacobians(p_used, n_used @ R) @ to_twist  # (m, k)
+        w = 1.0 / (1.0 + (r / cfg.kernel) ** 2)
+        JW = J * w[:, None]
+        H = JW.T @ J
+        if it == cfg.iterations:
+            break
+        # damping: a prior of one point's weight keeps directions the planes do not see put
+        step = -np.linalg.solve(H + np.eye(kdim), JW.T @ r)
+        n = float(np.linalg.norm(step))
+        if n > cfg.max_step:
+            step *= cfg.max_step / n
+        pose = geometry.orthonormalize(pose @ geometry.exp(to_twist @ step))
+        if n < 1e-4:
+            r = np.einsum("ij,ij->i", n_used, p_used @ pose[:3, :3].T + pose[:3, 3] - c_used)
+            w = 1.0 / (1.0 + (r / cfg.kernel) ** 2)
+            H = (J * w[:, None]).T @ J
+            break
+    if cfg.debias:
+        H = _debiased(H, p_used, to_twist, w * var_used)
+    sigma = max(cfg.min_point_sigma, 1.4826 * float(np.median(np.abs(r))))
+    info = cfg.independent_fraction * H / sigma**2
+    info = 0.5 * (info + info.T)
+    return PlaneRefinement(pose, info, B.T @ info @ B, B, used, sigma,
+                           details={"eigenvalues": np.linalg.eigvalsh(info).tolist()})

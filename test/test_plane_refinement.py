@@ -1,0 +1,125 @@
+"""Point-to-plane information and refinement inside a detected subspace."""
+import numpy as np
+import pytest
+
+from lili_odom import geometry
+from lili_odom.degeneracy.reference import ReferenceMap
+from lili_odom.pipeline.plane_refinement import (PlaneRefinementConfig, plane_jacobians,
+                                                 refine_in_subspace)
+
+AXIS_X = np.array([[1.0, 0, 0, 0, 0, 0]])  # scaled twist: translation along the corridor
+AXIS_Y = np.array([[0, 1.0, 0, 0, 0, 0]])
+
+
+def corridor(length: float, end_walls: bool, step: float = 0.1, width: float = 2.6,
+             height: float = 3.0, seed: int = 0) -> np.ndarray:
+    """Points on a box corridor x in [0, length], |y| <= width/2, z in [0, height]."""
+    rng = np.random.default_rng(seed)
+    xs = np.arange(0.0, length, step)
+    ys = np.arange(-width / 2, width / 2, step)
+    zs = np.arange(0.0, height, step)
+    X, Z = np.meshgrid(xs, zs)
+    walls = [np.c_[X.ravel(), np.full(X.size, y), Z.ravel()] for y in (-width / 2, width / 2)]
+    X, Y = np.meshgrid(xs, ys)
+    flats = [np.c_[X.ravel(), Y.ravel(), np.full(X.size, z)] for z in (0.0, height)]
+    parts = walls + flats
+    if end_walls:
+        Y, Z = np.meshgrid(ys, zs)
+        parts += [np.c_[np.full(Y.size, x), Y.ravel(), Z.ravel()] for x in (0.0, length)]
+    pts = np.vstack(parts)
+    return pts + rng.normal(0.0, 0.005, pts.shape)
+
+
+def scan_at(world: np.ndarray, x0: float, max_range: float = 30.0, n: int = 8000,
+            seed: int = 1) -> np.ndarray:
+    """World points within range of a sensor at (x0, 0, 1.5), in the sensor frame."""
+    rng = np.random.default_rng(seed)
+    local = world - np.array([x0, 0.0, 1.5])
+    local = local[np.linalg.norm(local, axis=1) < max_range]
+    return local[rng.choice(len(local), size=min(n, len(local)), replace=False)]
+
+
+def pose_at(x: float) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = [x, 0.0, 1.5]
+    return T
+
+
+def test_jacobian_matches_finite_difference():
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(5, 3))
+    n = rng.normal(size=(5, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    J = plane_jacobians(p, n)  # pose = identity, so n_b = n
+    for j in range(6):
+        xi = np.zeros(6)
+        xi[j] = 1e-6
+        moved = geometry.transform_points(geometry.exp(xi), p)
+        num = np.einsum("ij,ij->i", n, moved - p) / 1e-6
+        assert np.allclose(J[:, j], num, atol=1e-5)
+
+
+def test_tube_has_no_information_along_its_axis():
+    world = corridor(200.0, end_walls=False)
+    ref = ReferenceMap.from_points(world, 1.0, 200)
+    scan = scan_at(world, 100.0)
+    along = refine_in_subspace(scan, ref, pose_at(100.0), AXIS_X, 10.0)
+    across = refine_in_subspace(scan, ref, pose_at(100.0), AXIS_Y, 10.0)
+    assert along.ok and across.ok
+    assert along.information[0, 0] < 1e-3 * across.information[0, 0]
+    assert along.information[0, 0] < 1.0  # sigma above a metre
+
+
+def test_end_walls_in_range_hold_the_axis():
+    world = corridor(40.0, end_walls=True)
+    ref = ReferenceMap.from_points(world, 1.0, 200)
+    scan = scan_at(world, 25.0)
+    start = pose_at(25.2)  # 20 cm off along the axis
+    res = refine_in_subspace(scan, ref, start, AXIS_X, 10.0)
+    assert res.ok
+    assert abs(res.pose[0, 3] - 25.0) < 0.02
+    assert np.allclose(res.pose[1:3, 3], [0.0, 1.5], atol=1e-6)  # only the subspace moved
+    assert res.information[0, 0] > 400.0  # sigma below 5 cm
+    assert np.allclose(res.information_scaled, AXIS_X.T @ res.information @ AXIS_X)
+
+
+def test_tube_refinement_stays_at_the_start():
+    world = corridor(200.0, end_walls=False)
+    ref = ReferenceMap.from_points(world, 1.0, 200)
+    res = refine_in_subspace(scan_at(world, 100.0), ref, pose_at(100.3), AXIS_X, 10.0)
+    assert abs(res.pose[0, 3] - 100.3) < 0.05
+
+
+def test_no_subspace_and_empty_map():
+    world = corridor(40.0, end_walls=True)
+    ref = ReferenceMap.from_points(world, 1.0, 200)
+    res = refine_in_subspace(scan_at(world, 20.0), ref, pose_at(20.0), np.zeros((0, 6)), 10.0)
+    assert res.ok and res.information.shape == (0, 0)
+    far = refine_in_subspace(scan_at(world, 20.0), ref, pose_at(500.0), AXIS_X, 10.0)
+    assert not far.ok and np.all(far.information == 0.0)
+
+
+def test_config_validation():
+    with pytest.raises(ValueError, match="plane_refinement.independent_fraction"):
+        PlaneRefinementConfig(independent_fraction=0.0).validate()
+    PlaneRefinementConfig().validate()
+
+
+def test_the_odometry_clears_directions_point_to_plane_holds():
+    from lili_odom.degeneracy.result import DegeneracyResult
+    from lili_odom.pipeline.odometry import OdometryPipeline, PipelineConfig
+    from lili_odom.pipeline.plane_refinement import PlaneRefinement
+
+    basis = np.vstack([AXIS_X, AXIS_Y])
+    det = DegeneracyResult("lili", np.eye(4), basis, 10.0)
+    info = np.diag([5000.0, 10.0])  # x held to 1.4 cm, y to 32 cm
+    refined = PlaneRefinement(np.eye(4), info, basis.T @ info @ basis, basis)
+    pipeline = OdometryPipeline(PipelineConfig())
+    left, left_info = pipeline._clear_held_directions(det, refined)
+    assert left.dimension == 1 and np.allclose(np.abs(left.basis_scaled), AXIS_Y)
+    assert np.allclose(left_info, 10.0 * AXIS_Y.T @ AXIS_Y)
+    assert left.details["cleared"] == 1 and pipeline.counters["directions_cleared"] == 1
+    off = OdometryPipeline(PipelineConfig(plane_refinement=PlaneRefinementConfig(
+        clear_information=0.0)))
+    same, same_info = off._clear_held_directions(det, refined)
+    assert same.dimension == 2 and np.allclose(same_info, refined.information_scaled)
