@@ -46,6 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"peers (default: {' '.join(DEFAULT_PEERS)}, those installed)")
     parser.add_argument("--split", choices=("tuning", "validation", "all"), default="all")
     parser.add_argument("--seeds", nargs="+", type=int, help="seeds (default: each scenario's own; ci: its first)")
+    parser.add_argument("--max-seeds", type=int, default=0, metavar="N",
+                        help="at most the first N of each scenario's own seeds (default: all)")
     parser.add_argument("--resolution", metavar="RxC", help="LiDAR rows x columns for every scenario")
     parser.add_argument("--bags", nargs="+", type=Path, metavar="BAG",
                         help="also run on these recorded bags (they need a ground-truth topic)")
@@ -147,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
         if len(sys.argv) > 1 and sys.argv[1] == "suite" else "lili-odom suite " + _describe(args, methods, peers)
     request = SuiteRequest(
         out=args.out, scenarios=args.scenarios, preset=args.preset, methods=methods + peers,
-        split=args.split, seeds=args.seeds, resolution=args.resolution, bags=list(args.bags or []),
+        split=args.split, seeds=args.seeds, max_seeds=max(0, args.max_seeds), resolution=args.resolution, bags=list(args.bags or []),
         truth_topic=args.truth_topic, config_path=str(args.config) if args.config else None,
         overrides=overrides, rpe_segment_m=args.rpe_segment,
         cache_dir=str(args.cache_dir) if args.cache_dir else None, resume=args.resume,
@@ -187,6 +189,8 @@ def _describe(args: argparse.Namespace, methods: list[str], peers: list[str]) ->
         parts += ["--split", args.split]
     if args.seeds:
         parts += ["--seeds", *map(str, args.seeds)]
+    if args.max_seeds:
+        parts += ["--max-seeds", str(args.max_seeds)]
     if args.resolution:
         parts += ["--resolution", args.resolution]
     for s in args.set:

@@ -34,6 +34,7 @@ class SuiteRequest:
         methods: our methods and peers to run, in table order.
         split: ``tuning``, ``validation`` or ``all``.
         seeds: seeds to run (None: the scenario's own seeds; the first one with ``ci``).
+        max_seeds: at most this many of each scenario's own seeds, the first ones (0: all).
         resolution: ``RxC`` overriding every scenario's sensor (None: the scenario's).
         bags: users' own bags (directories or ``.mcap``) run instead of / besides scenarios;
             scenario = the bag's name, split = ``user``.
@@ -53,6 +54,7 @@ class SuiteRequest:
     methods: list[str] = field(default_factory=lambda: ["none", "lili", "wheels"])
     split: str = "all"
     seeds: list[int] | None = None
+    max_seeds: int = 0
     resolution: str | None = None
     bags: list[Path] = field(default_factory=list)
     truth_topic: str = "/ground_truth/odom"
@@ -106,6 +108,8 @@ def plan_targets(request: SuiteRequest, scenarios: list) -> list[Target]:
     targets = []
     for sc in scenarios:
         seeds = request.seeds if request.seeds is not None else (sc.seeds[:1] if ci else sc.seeds)
+        if request.seeds is None and request.max_seeds > 0:
+            seeds = seeds[:request.max_seeds]
         if ci:
             res = request.resolution or "x".join(str(v) for v in sc.ci.resolution)
         else:
