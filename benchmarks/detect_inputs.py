@@ -10,7 +10,7 @@ scaled twist space [deg] (90 when the dimensions differ), both detection times [
 the scan points kept. On the real pair also the translation error of the registered pose against
 the reference poses [m].
 
-Usage: ``python benchmarks/detect_inputs.py [--methods lili zhang hessian] [--out DIR]``
+Usage: ``python -m benchmarks.detect_inputs [--methods lili zhang hessian] [--out DIR]``
 """
 from __future__ import annotations
 
@@ -22,13 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from lili_odom.degeneracy.detection_input import odometry_detector, prepare  # noqa: E402
-from lili_odom.degeneracy.factory import make_detector  # noqa: E402
-from lili_odom.degeneracy.subspace import largest_principal_angle_deg, truth_scaled  # noqa: E402
-from lili_odom.sim import shapes  # noqa: E402
+from benchmarks._common import RESULTS, ROOT
+from lili_odom.degeneracy.detection_input import odometry_detector, prepare
+from lili_odom.degeneracy.factory import make_detector
+from lili_odom.degeneracy.subspace import largest_principal_angle_deg, truth_scaled
+from lili_odom.sim import shapes
 
 OUSTER = ROOT.parent / "shared" / "data" / "ouster"
 PCAP = "OS-1-128_v2.3.0_1024x10_lb_n3.pcap"
@@ -110,7 +108,7 @@ def markdown(rows: list[dict], command: str) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--methods", nargs="+", default=["lili", "zhang", "hessian"])
-    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
+    parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
     rows = []
@@ -124,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(cell(case.name, "noisy" if case.noisy else "clean", case.reference, case.scan,
                              case.initial_pose, m))
             print(json.dumps(rows[-1]), flush=True)
-    command = "python benchmarks/detect_inputs.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    command = "python -m benchmarks.detect_inputs " + " ".join(argv if argv is not None else sys.argv[1:])
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "detect_inputs.json").write_text(json.dumps({"command": command.strip(), "rows": rows}, indent=1))
     (args.out / "detect_inputs.md").write_text(markdown(rows, command.strip()))
