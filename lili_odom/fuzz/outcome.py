@@ -27,13 +27,13 @@ class Outcome:
     Attributes:
         status: one of :data:`STATUSES`.
         detail: one line (exception type and message, or what was wrong).
-        case: what the case fed in (one line).
+        input: what the case fed in (one line).
         error_type: name of the exception raised, "" when none.
     """
 
     status: str
     detail: str = ""
-    case: str = ""
+    input: str = ""
     error_type: str = ""
 
     def to_dict(self) -> dict:
@@ -45,13 +45,13 @@ def one_line(text: object, limit: int = 300) -> str:
     return out if len(out) <= limit else out[: limit - 3] + "..."
 
 
-def from_exception(exc: BaseException, documented: tuple[type, ...], case: str) -> Outcome:
+def from_exception(exc: BaseException, documented: tuple[type, ...], input: str) -> Outcome:
     """DOCUMENTED when ``exc`` is one of ``documented`` and says something, else OTHER."""
     name = type(exc).__name__
     text = one_line(f"{name}: {exc}")
     if isinstance(exc, documented) and str(exc).strip():
-        return Outcome(DOCUMENTED, text, case, name)
-    return Outcome(OTHER, text, case, name)
+        return Outcome(DOCUMENTED, text, input, name)
+    return Outcome(OTHER, text, input, name)
 
 
 def all_finite(*arrays) -> bool:
