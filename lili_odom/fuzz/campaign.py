@@ -181,10 +181,16 @@ def run_campaign(plans: list[DoorPlan], seed: int, jobs: int = 1,
         for plan in plans:
             found = 0
 
-            def advance(row: dict, task=tasks[plan.door]) -> None:
-                nonlocal found
+            done = 0
+
+            def advance(row: dict, task=tasks[plan.door], plan=plan) -> None:
+                nonlocal found, done
                 found += row["status"] in FINDINGS
+                done += 1
                 bar.update(task, advance=1, findings=found)
+                if not progress and (done % max(1, plan.cases // 10) == 0 or done == plan.cases):
+                    print(f"{plan.door}: {done}/{plan.cases} cases, {found} findings, "
+                          f"{time.monotonic() - t_start:.0f} s", file=sys.stderr, flush=True)
 
             t0 = time.monotonic()
             rows = run_door(plan, seed, jobs, advance)
