@@ -6,7 +6,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
 .PHONY: demo test install benchmark-shapes benchmark-tunnel benchmark-speed \
-	benchmark-detection-cost benchmark-robustness clean
+	benchmark-detection-cost benchmark-robustness benchmark-fuzz clean
 
 $(STAMP): setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -42,6 +42,11 @@ benchmark-detection-cost: $(STAMP)
 benchmark-robustness: $(STAMP)
 	$(PY) benchmarks/faults.py --resolution 32x256 --play-rates
 	$(PY) benchmarks/long_run.py
+
+# Fuzz campaign over every input door (10,074 seeded cases run in worker subprocesses; about
+# 20-40 min on 2 cores): benchmarks/results/fuzz.md, fuzz.json and reproducers of any finding.
+benchmark-fuzz: $(STAMP)
+	nice -n 10 $(PY) benchmarks/fuzz.py
 
 clean:
 	rm -rf $(VENV) build install log *.egg-info
