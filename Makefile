@@ -43,7 +43,7 @@ benchmark-robustness: $(STAMP)
 	$(PY) benchmarks/faults.py --resolution 32x256 --play-rates
 	$(PY) benchmarks/long_run.py
 
-# Fuzz campaign over every input door (10,074 seeded cases run in worker subprocesses; about
+# Fuzz campaign over every input door (10,374 seeded cases run in worker subprocesses; about
 # 20-40 min on 2 cores): benchmarks/results/fuzz.md, fuzz.json and reproducers of any finding.
 benchmark-fuzz: $(STAMP)
 	nice -n 10 $(PY) benchmarks/fuzz.py

@@ -4,7 +4,7 @@ Runs the seeded cases of each door in worker subprocesses (native aborts and han
 and counted per case), writes ``benchmarks/results/fuzz.json`` and ``fuzz.md`` and, for every
 finding, a reproducer script under ``benchmarks/results/fuzz_reproducers/``.
 
-    python benchmarks/fuzz.py                   # the full campaign (10,074 cases)
+    python benchmarks/fuzz.py                   # the full campaign (10,374 cases)
     python benchmarks/fuzz.py --scale 0.05      # a quick slice
     python benchmarks/fuzz.py --doors api bags  # some doors only
 """
@@ -20,7 +20,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 #: Cases per door of the full campaign.
-FULL = {"clouds": 7700, "api": 1200, "feeder": 1000, "bags": 150, "sequences": 24}
+FULL = {"clouds": 7700, "api": 1200, "feeder": 1000, "bags": 150, "detect": 300,
+        "sequences": 24}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -12,6 +12,8 @@ be replayed by its number):
   :class:`~lili_odom.pipeline.feeder.MessageFeeder`; no error may escape.
 * ``bags`` (:mod:`.bags`): truncated, corrupt and mistyped rosbag2 bags into ``lili-odom run``;
   documented error :class:`~lili_odom.errors.UserError` (exit code 2, one line).
+* ``detect`` (:mod:`.detect`): broken cloud and pose files and options into ``lili-odom detect``;
+  documented error :class:`~lili_odom.errors.UserError`.
 * ``sequences`` (:mod:`.sequences`): a few hundred scans of a real bag with sensor faults
   through the feeder and the pipeline (``lili`` and ``none``).
 

@@ -15,6 +15,7 @@ DOORS: dict[str, tuple[int, str, float]] = {
     "feeder": (3, "lili_odom.fuzz.feeder", 120.0),
     "bags": (4, "lili_odom.fuzz.bags", 300.0),
     "sequences": (5, "lili_odom.fuzz.sequences", 900.0),
+    "detect": (6, "lili_odom.fuzz.detect", 300.0),
     "selftest": (99, "lili_odom.fuzz.selftest", 5.0),
 }
 

@@ -15,6 +15,8 @@ _WHAT = {
     "feeder": "ROS messages on any topic -> `MessageFeeder` (documented: none, nothing may "
               "escape)",
     "bags": "broken bags and parameter files -> `lili-odom run` (documented: `UserError`, exit 2)",
+    "detect": "cloud / pose files and options -> `lili-odom detect` (documented: `UserError`, "
+              "exit 2)",
     "sequences": "faulted 200-scan runs (CI bag + a 50-scan loop) -> feeder + pipeline "
                  "(`lili`, `none`)",
 }
