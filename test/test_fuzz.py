@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from lili_odom.fuzz.campaign import DoorPlan, run_campaign, run_range
@@ -88,3 +89,39 @@ def test_reproducer_replays_its_case(tmp_path):
     script = reproducer(rows[0], 1, {})
     assert 'run_case("selftest", 1, 0)' in script
     compile(script, "repro.py", "exec")
+
+
+def _detect(tmp_path, reference, scan, *extra) -> tuple[int, str]:
+    from lili_odom.cli import main
+
+    np.save(tmp_path / "reference.npy", reference)
+    np.save(tmp_path / "scan.npy", scan)
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        code = main(["detect", "--reference", str(tmp_path / "reference.npy"), "--scan",
+                     str(tmp_path / "scan.npy"), *extra])
+    return code, err.getvalue()
+
+
+@pytest.mark.parametrize("method", ["hessian", "zhang", "lili"])
+@pytest.mark.parametrize("which", ["reference", "scan"])
+def test_detect_drops_finite_but_huge_coordinates(tmp_path, method, which):
+    """Rows at 1e300 m made the detectors' KD-tree query and normal estimation raise
+    ValueError / IndexError out of ``lili-odom detect``."""
+    from lili_odom.fuzz.api import room
+
+    good = room(np.random.default_rng(0), 200)
+    bad = good.copy()
+    bad[::2] = 1e300
+    ref, scan = (bad, good - [0.2, 0, 0]) if which == "reference" else (good, bad - [0.2, 0, 0])
+    code, err = _detect(tmp_path, ref, scan, "--method", method)
+    assert code in (0, 2), err
+    assert code == 0 or err.count("\n") == 1
+
+
+def test_detect_rejects_an_infinite_voxel_size(tmp_path):
+    from lili_odom.fuzz.api import room
+
+    good = room(np.random.default_rng(0), 200)
+    code, err = _detect(tmp_path, good, good, "--voxel-size", "inf")
+    assert code == 2 and "--voxel-size must be finite and > 0" in err
