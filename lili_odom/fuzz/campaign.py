@@ -95,7 +95,12 @@ def run_range(door: str, seed: int, start: int, stop: int, options: dict | None 
                 if line is None:
                     proc.wait()
                     break
-                msg = json.loads(line)
+                try:
+                    msg = json.loads(line)
+                except json.JSONDecodeError:
+                    continue  # not a protocol line
+                if not isinstance(msg, dict):
+                    continue
                 if "start" in msg:
                     current, started_at = msg["start"], time.monotonic()
                     deadline = started_at + limit

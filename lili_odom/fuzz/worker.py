@@ -2,12 +2,15 @@
 
 ``python -m lili_odom.fuzz.worker DOOR SEED START STOP [OPTIONS_JSON]`` prints
 ``{"start": i}`` before case ``i`` and ``{"case": i, ...outcome}`` after it (flushed), so the
-parent knows which case was running when the process died or stopped answering.
+parent knows which case was running when the process died or stopped answering. These lines
+go to the original standard output; everything else written to file descriptor 1 (Python
+``print`` and native libraries alike) is sent to standard error.
 """
 from __future__ import annotations
 
 import json
 import logging
+import os
 import sys
 import time
 import warnings
@@ -20,7 +23,9 @@ def main(argv: list[str]) -> int:
     options = json.loads(argv[4]) if len(argv) > 4 else {}
     logging.basicConfig(level=logging.CRITICAL)  # the cases log warnings by design
     warnings.simplefilter("ignore")
-    out = sys.stdout
+    out = os.fdopen(os.dup(1), "w", buffering=1)
+    sys.stdout.flush()
+    os.dup2(2, 1)  # native prints (e.g. Sophus) must not break the protocol
     for i in range(start, stop):
         out.write(json.dumps({"start": i}) + "\n")
         out.flush()
