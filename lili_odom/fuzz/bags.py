@@ -134,6 +134,7 @@ def run_case(rng: np.random.Generator) -> Outcome:
             code = exc.code if isinstance(exc.code, int) else 2
         except Exception as exc:  # noqa: BLE001 - classified
             return from_exception(exc, (), case)
+    err = io.StringIO(err.getvalue().replace(str(work), "<tmp>"))
     lines = [ln for ln in err.getvalue().splitlines() if ln.startswith("lili-odom run: error:")]
     if code == 0:
         return Outcome(CLEAN, one_line(out.getvalue().strip().splitlines()[-1:] or ""), case)

@@ -161,12 +161,17 @@ def summarize(rows: list[dict], wall_s: float) -> dict:
 def reproducer(row: dict, seed: int, options: dict) -> str:
     """A script that replays the case of ``row`` in a fresh process."""
     opts = "".join(f", {k}={v!r}" for k, v in options.items())
+
+    def text(key: str) -> str:  # safe inside the docstring
+        return str(row.get(key) or "").replace("\\", "/").replace('"""', "'''")
+
     return (f'"""Fuzz finding: door {row["door"]}, seed {seed}, case {row["case"]}: '
             f'{row["status"]}.\n\n'
-            f'{row.get("detail", "")}\n\nInput: {row.get("input", "")}\n\n'
+            f'{text("detail")}\n\nInput: {text("input")}\n\n'
             f'Run from the repository root: python <this file> (a native abort ends it with a '
             f'signal).\n"""\n'
-            "from lili_odom.fuzz.doors import run_case\n\n"
+            "import os\nimport sys\n\nsys.path.insert(0, os.getcwd())\n\n"
+            "from lili_odom.fuzz.doors import run_case  # noqa: E402\n\n"
             f'print(run_case("{row["door"]}", {seed}, {row["case"]}{opts}))\n')
 
 

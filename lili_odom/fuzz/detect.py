@@ -144,6 +144,7 @@ def run_case(rng: np.random.Generator) -> Outcome:
             code = exc.code if isinstance(exc.code, int) else 2
         except Exception as exc:  # noqa: BLE001 - classified
             return from_exception(exc, (), case)
+    err = io.StringIO(err.getvalue().replace(str(work), "<tmp>"))
     lines = [ln for ln in err.getvalue().splitlines() if ln.startswith("lili-odom detect: error:")]
     if code == 0:
         return Outcome(CLEAN, "", case)
