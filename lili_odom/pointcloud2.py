@@ -170,6 +170,9 @@ def _field_specs(fields: Any) -> list[PointFieldSpec]:
         raise CloudFormatError("fields is not a sequence") from exc
     for item in items:
         if hasattr(item, "name"):
+            missing = [a for a in ("offset", "datatype") if not hasattr(item, a)]
+            if missing:
+                raise CloudFormatError(f"field {item.name!r} has no {missing[0]!r}")
             name, offset = item.name, item.offset
             datatype, count = item.datatype, getattr(item, "count", 1)
         else:

@@ -74,9 +74,9 @@ class ReaderStats:
     per_topic: dict[str, int] = field(default_factory=dict)
 
 
-def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(a) for a in exc.args) if exc.args else type(exc).__name__
-    return " ".join(text.split())
+def _one_line(exc: BaseException, limit: int = 200) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 class BagReader:

@@ -36,8 +36,8 @@ def run(args: argparse.Namespace) -> int:
     reference = load_points(args.reference)
     scan = load_points(args.scan)
     initial = load_pose(args.initial_pose) if args.initial_pose else np.eye(4)
-    if args.voxel_size is not None and not args.voxel_size > 0:
-        raise UserError(f"--voxel-size must be > 0, got {args.voxel_size}")
+    if args.voxel_size is not None and not 0 < args.voxel_size < np.inf:
+        raise UserError(f"--voxel-size must be finite and > 0, got {args.voxel_size}")
     try:
         inputs = prepare(reference, scan, raw=args.raw, voxel_size=args.voxel_size)
     except ValueError as exc:

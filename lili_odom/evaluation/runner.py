@@ -177,9 +177,17 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
 
         run.truth.sort(key=lambda x: x[0])
         write_tum(out_dir / "truth.tum", run.truth)
-        m = evaluate(run.stamps, run.poses, np.array([s for s, _ in run.truth]),
-                     np.array([T for _, T in run.truth]), segment_m=rpe_segment)
-        summary["metrics"] = m.to_dict()
+        from evo import EvoException
+
+        try:
+            m = evaluate(run.stamps, run.poses, np.array([s for s, _ in run.truth]),
+                         np.array([T for _, T in run.truth]), segment_m=rpe_segment)
+            summary["metrics"] = m.to_dict()
+        except EvoException as exc:
+            # too few or degenerate poses to align (e.g. a short run standing still)
+            summary["metrics"] = None
+            summary["metrics_error"] = " ".join(str(exc).split())
+            log.warning("no ATE/RPE for this run: %s", summary["metrics_error"])
     run.summary = summary
     (out_dir / "metrics.json").write_text(json.dumps(summary, indent=1) + "\n")
 

@@ -1,7 +1,9 @@
 """Read point clouds and poses from files: ``.npy`` (N x 3+), ``.ply`` (via trimesh), ``.pcd``.
 
-Points are returned as (N, 3) float64 [m] in the file's own frame. Every failure is a
-``UserError`` with a one-line message naming the file.
+Points are returned as (N, 3) float64 [m] in the file's own frame; rows with a non-finite
+coordinate or one beyond ``MAX_COORDINATE_M`` (no sensor or map reaches it; such values make
+distances overflow in the detectors) are dropped. Every failure is a ``UserError`` with a
+one-line message naming the file.
 """
 from __future__ import annotations
 
@@ -12,12 +14,16 @@ import numpy as np
 from lili_odom.errors import UserError
 from lili_odom.geometry import drop_nonfinite_rows
 
+#: Largest plausible coordinate magnitude [m]; rows beyond it are dropped as corrupt.
+MAX_COORDINATE_M = 1e7
+
 _PCD_TYPES = {("F", 4): "f4", ("F", 8): "f8", ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4",
               ("I", 8): "i8", ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4", ("U", 8): "u8"}
 
 
 def load_points(path: str | Path) -> np.ndarray:
-    """Load an (N, 3) float64 cloud; rows with non-finite coordinates are dropped."""
+    """Load an (N, 3) float64 cloud; rows with non-finite or implausibly large coordinates
+    (beyond ``MAX_COORDINATE_M``) are dropped."""
     path = Path(path)
     if not path.is_file():
         raise UserError(f"{path}: no such file")
@@ -39,8 +45,9 @@ def load_points(path: str | Path) -> np.ndarray:
     if pts.ndim != 2 or pts.shape[1] < 3 or not np.issubdtype(pts.dtype, np.number):
         raise UserError(f"{path}: expected an N x 3 numeric array, got shape {pts.shape}")
     pts = drop_nonfinite_rows(pts[:, :3].astype(np.float64))
+    pts = pts[np.all(np.abs(pts) <= MAX_COORDINATE_M, axis=1)]
     if len(pts) == 0:
-        raise UserError(f"{path}: no finite points")
+        raise UserError(f"{path}: no finite points within {MAX_COORDINATE_M:g} m")
     return pts
 
 

@@ -44,6 +44,7 @@ from lili_odom.pipeline.plane_refinement import PlaneRefinementConfig, refine_in
 from lili_odom.pipeline.remap import constrained_registration
 from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig
 from lili_odom.pipeline.types import ImuSample, OdometryOutput, Scan, WheelSample
+from lili_odom.pipeline.validation import checked_scan
 
 log = logging.getLogger(__name__)
 
@@ -242,7 +243,12 @@ class OdometryPipeline:
         return times, scan.stamp + float(times.min()), scan.stamp + float(times.max())
 
     def process_scan(self, scan: Scan) -> OdometryOutput | None:
-        """Run one scan through the pipeline; None when it was skipped (see ``counters``)."""
+        """Run one scan through the pipeline; None when it was skipped (see ``counters``).
+
+        Raises:
+            lili_odom.pipeline.validation.PipelineInputError: malformed scan (a ValueError).
+        """
+        scan = checked_scan(scan, self.counters)
         t_start = time.perf_counter()
         timings: dict[str, float] = {}
         warnings: list[str] = []

@@ -118,9 +118,10 @@ class ScanMatcher:
         """
         times = None if times is None else np.asarray(times, dtype=float).reshape(-1)
         if (times is None or len(times) != len(points) or len(times) == 0
-                or not np.all(np.isfinite(times)) or np.ptp(times) <= 0):
+                or not np.all(np.isfinite(times)) or not 0 < np.ptp(times) < np.inf):
             # KISS-ICP normalises times by their span: a zero span gives 0/0 and a NaN rotation
-            # that aborts the process inside Sophus. An empty time array skips deskewing.
+            # that aborts the process inside Sophus, and so does a span that overflows to
+            # inf (finite times near +-1e308). An empty time array skips deskewing.
             times = np.zeros(0)
         motion = orthonormalize(sweep_motion) if is_valid_pose(sweep_motion, 1e-3) else np.eye(4)
         frame = self._preprocessor.preprocess(points, times, motion)

@@ -1,0 +1,16 @@
+"""Fuzz finding: door api, seed 0, case 254: other_exception.
+
+AttributeError: 'list' object has no attribute 'min'
+
+Input: none; scaled points, stamp array(100.35); points object dtype, times as a list, dropped 'x'
+
+Run from the repository root: python <this file> (a native abort ends it with a signal).
+"""
+import os
+import sys
+
+sys.path.insert(0, os.getcwd())
+
+from lili_odom.fuzz.doors import run_case  # noqa: E402
+
+print(run_case("api", 0, 254))
