@@ -34,7 +34,7 @@ def profile_path() -> Path | None:
 
         try:
             candidates.append(Path(get_package_share_directory("lili_odom")))
-        except PackageNotFoundError:
+        except (PackageNotFoundError, OSError):  # not installed / AMENT_PREFIX_PATH unset
             pass
     except ImportError:
         pass
