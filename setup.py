@@ -19,7 +19,10 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
         ("share/" + package_name + "/config/worlds", glob("config/worlds/*.yaml")),
+        ("share/" + package_name + "/config/dds", glob("config/dds/*.xml")),
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
+        ("share/" + package_name + "/rviz", glob("rviz/*.rviz")),
+        ("share/" + package_name + "/foxglove", glob("foxglove/*.json")),
     ],
     python_requires=">=3.10",
     install_requires=[
