@@ -48,6 +48,13 @@ setup(
             "ros-jazzy-rmw-fastrtps-cpp",
         ],
         "dev": ["pytest>=7", "hypothesis>=6"],
+        # Ouster recordings (lili-odom run RECORDING.pcap/.osf, test_ouster.py): the Ouster
+        # SDK's runtime dependencies. The SDK itself pins rosbags==0.9.23, which conflicts with
+        # rosbags>=0.10 above, so it is installed without its pins:
+        #   pip install '.[ouster]' && pip install --no-deps ouster-sdk==1.0.1
+        # (make install-ouster)
+        "ouster": ["click", "more-itertools", "nanobind", "packaging", "Pillow", "prettytable",
+                   "psutil", "requests", "threadpoolctl", "laspy", "zeroconf", "flask"],
     },
     zip_safe=True,
     maintainer="lili_odom maintainers",

@@ -12,6 +12,10 @@ arrive. Cases:
 * ``profile_publisher_only``: the package profile in the publishing process only
 * ``profile_both``: the package's defaults (node and publisher load the profile), best effort
 * ``reliable_fastdds_default``: Fast DDS defaults, reliable publisher and subscriber
+* ``reliable_to_best_effort_*``: a reliable publisher (``lili-odom play``'s default) and the
+  node's best-effort subscription, with Fast DDS's defaults and with the package profile
+
+Cases named with ``--cases`` replace their rows in an existing result file.
 
 Writes ``benchmarks/results/dds_large_clouds.json`` and ``.md``.
 
@@ -45,6 +49,10 @@ CASES = {
     "profile_publisher_only": ({"profile": "1"}, {}, "sensor-data", False),
     "profile_both": ({"profile": "1"}, {"profile": "1"}, "sensor-data", False),
     "reliable_fastdds_default": ({}, {}, "reliable", True),
+    # `lili-odom play` (reliable) into the node's default best-effort subscription
+    "reliable_to_best_effort_fastdds_default": ({}, {}, "reliable", False),
+    "reliable_to_best_effort_profile_both": ({"profile": "1"}, {"profile": "1"}, "reliable",
+                                             False),
 }
 _DDS_VARS = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE",
              "FASTDDS_BUILTIN_TRANSPORTS", "LILI_ODOM_DDS_PROFILE")
@@ -116,10 +124,16 @@ def main() -> int:
     p.add_argument("--out", type=Path, default=RESULTS / "dds_large_clouds.json")
     a = p.parse_args()
     rows = []
+    if a.out.is_file() and set(a.cases) != set(CASES):
+        old = json.loads(a.out.read_text())
+        if (old["count"], old["rate_hz"], old["height"], old["width"]) == (
+                a.count, a.rate, a.height, a.width):
+            rows = [r for r in old["rows"] if r["case"] not in a.cases]
     for name in a.cases:
         row = run_case(name, a.count, a.rate, a.height, a.width)
         print(json.dumps(row), flush=True)
         rows.append(row)
+    rows.sort(key=lambda r: list(CASES).index(r["case"]))
     try:
         from importlib.metadata import version
 
