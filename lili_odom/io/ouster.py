@@ -243,9 +243,8 @@ class OusterRecording:
         T_lidar_sensor = np.linalg.inv(self.T_sensor_lidar)
         src = self._open(packets=False)
         try:
-            for item in src:
-                frame = item[0] if isinstance(item, (list, tuple)) or hasattr(item, "valid_frames") \
-                    else item
+            for item in src:  # one FrameSet (a list of LidarFrames, one per sensor) per step
+                frame = item[0] if hasattr(item, "__getitem__") else item
                 if frame is None:
                     continue
                 try:
@@ -262,9 +261,7 @@ class OusterRecording:
         """The IMU samples (none when the recording has no IMU packets)."""
         from lili_odom.bagio.factory import RosbagsFactory
 
-        f = RosbagsFactory()
-        R = self.T_sensor_imu[:3, :3]  # the IMU's axes are os_imu's; kept in its frame
-        del R
+        f = RosbagsFactory()  # samples stay in os_imu (the SDK's axes); SI units
         src = self._open(packets=True)
         try:
             for item in src:

@@ -18,8 +18,21 @@ every processed scan), ``~/path`` (Path, every ``path_period`` s of stamp time, 
 ``odom_frame``, reliable + transient-local depth 1, every ``map_publish_period_s`` s of stamp
 time), ``~/degeneracy`` (MarkerArray,
 see :func:`lili_odom.messages.degeneracy_markers`), ``~/degeneracy/basis`` (JSON String, see
-:func:`lili_odom.messages.degeneracy_basis_dict`) and ``/tf`` (``odom_frame`` ->
-``base_frame``) when ``publish_tf`` is true and ``tf2_msgs`` is importable.
+:func:`lili_odom.messages.degeneracy_basis_dict`), ``/tf`` (``odom_frame`` -> ``base_frame``,
+or the inverse with ``publish_tf_inverse``) when ``publish_tf`` is true and ``tf2_msgs`` is
+importable, and ``/diagnostics`` (DiagnosticArray every ``diagnostics_publish_period`` s of
+wall time, statuses from :class:`lili_odom.ros.health.HealthMonitor`).
+
+Service ``~/save_map`` (``std_srvs/srv/Trigger``): writes the accumulated map
+(:class:`lili_odom.io.map_file.MapAccumulator`: the local map merged every
+``map_accumulate_period_s`` s of stamp time, voxel size ``map_save_voxel``, at most
+``map_save_max_points`` points) to ``map_save_path`` (``.pcd`` / ``.ply``); the answer's
+``message`` is the absolute path written, or the error with ``success`` false.
+
+Missing scans: a gap between consecutive scan stamps longer than 1.5 periods of
+``lidar_rate_hz`` counts the scans lost before the node (``scans_missing``, logged, in
+``/diagnostics``); DDS: ``main`` loads the package's Fast DDS profile unless the environment
+chose one (:mod:`lili_odom.ros.dds`, docs/ros.md).
 
 Threading: callbacks run on a single-threaded executor and only buffer (IMU, wheel,
 ``/tf_static``) or hand over (scans), so they are never starved by processing. One worker
