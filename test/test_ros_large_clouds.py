@@ -13,6 +13,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import threading
+import time
 
 import pytest
 
@@ -50,7 +51,13 @@ def test_128x1024_clouds_at_10hz_reach_the_node_with_the_defaults(monkeypatch):
                               "--width", "1024", "--qos", "sensor-data"],
                              env=env, capture_output=True, text=True, timeout=50)
         assert pub.returncode == 0, pub.stderr
-        wait_for(lambda: node.counters["scans_received"] >= COUNT, 2.0)
+        # a busy executor may still hold samples in the subscription's history: let it drain
+        received = -1
+        while node.counters["scans_received"] != received:
+            received = node.counters["scans_received"]
+            if received >= COUNT:
+                break
+            time.sleep(2.0)
         diag = node.diagnostics()
     finally:
         executor.shutdown(timeout_sec=2.0)
@@ -58,7 +65,8 @@ def test_128x1024_clouds_at_10hz_reach_the_node_with_the_defaults(monkeypatch):
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
     received = diag["scans_received"]
-    assert received >= 0.99 * COUNT, diag
+    assert received >= 0.99 * COUNT, {k: diag[k] for k in ("scans_received", "scans_missing",
+                                                           "scans_processed", "scans_dropped")}
     # losses inside the run show up as missing scans (the first and last cannot)
     assert diag["scans_missing"] <= COUNT - received, diag
     assert diag["scans_dropped"] == 0, diag

@@ -179,6 +179,7 @@ class LiliOdomNode(Node):
         self.map = MapAccumulator(float(self.p["map_save_voxel"]),
                                   int(self.p["map_save_max_points"]))
         self._map_lock = threading.Lock()
+        self._map_requests: list[threading.Event] = []  # served by the worker
         self._last_accumulate_stamp = -float("inf")
         self._processing_time = 0.0
         self._scans = ScanQueue(int(self.p["scan_queue_size"]))
@@ -321,6 +322,7 @@ class LiliOdomNode(Node):
                 self.get_logger().error(f"scan processing failed: {type(exc).__name__}: {exc}",
                                         throttle_duration_sec=5.0)
             self._processing_time += time.perf_counter() - t0
+            self._serve_map_requests()
 
     def _step(self, msg: Any, wait_wall: float) -> None:
         """Feed the buffered inputs, then the scan (if any); publish what comes out."""
@@ -342,6 +344,8 @@ class LiliOdomNode(Node):
                 self._path.clear()
                 self._last_path_stamp = self._last_map_stamp = -float("inf")
                 self._last_accumulate_stamp = -float("inf")
+                with self._map_lock:
+                    self.map.clear()  # a new odometry frame: the old map does not fit it
                 self.counters["resets"] += 1
             self._last_stamp = stamp
             outputs += feeder.feed(self.p["lidar_topic"], msg)
@@ -414,12 +418,29 @@ class LiliOdomNode(Node):
                     f"saved map reached map_save_max_points ({self.map.max_points}): voxel "
                     f"size now {self.map.voxel_size:.3f} m")
 
-    def save_map(self, path: str | None = None) -> str:
-        """Write the accumulated map (plus the current local map) to ``path`` (default:
-        parameter ``map_save_path``); returns the absolute path. Raises ValueError / OSError."""
-        local = np.asarray(self.pipeline.local_map_points(), dtype=np.float64)
+    def _serve_map_requests(self) -> None:
+        """Worker thread: merge the current local map for waiting ``save_map`` calls (only
+        the worker touches the pipeline)."""
         with self._map_lock:
-            self.map.add(local)
+            requests, self._map_requests = self._map_requests, []
+        if requests:
+            try:
+                self._accumulate_map()
+            finally:
+                for done in requests:
+                    done.set()
+
+    def save_map(self, path: str | None = None, wait_s: float = 2.0) -> str:
+        """Write the accumulated map to ``path`` (default: parameter ``map_save_path``);
+        returns the absolute path. The worker first merges the current local map (waited for
+        up to ``wait_s``; a worker busy longer leaves the map as of its last merge).
+        Raises ValueError / OSError."""
+        done = threading.Event()
+        with self._map_lock:
+            self._map_requests.append(done)
+        if self._worker.is_alive():
+            done.wait(wait_s)
+        with self._map_lock:
             points = self.map.points()
         return str(save_points(path or self.p["map_save_path"], points))
 
