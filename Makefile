@@ -6,7 +6,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test install benchmark-shapes benchmark-tunnel benchmark-speed \
+.PHONY: demo test install install-ouster benchmark-shapes benchmark-tunnel benchmark-speed \
 	benchmark-detection-cost benchmark-robustness benchmark-suite benchmark-fuzz clean
 
 $(STAMP): setup.py
@@ -16,6 +16,12 @@ $(STAMP): setup.py
 	touch $(STAMP)
 
 install: $(STAMP)
+
+# The Ouster SDK for reading .pcap/.osf recordings (see setup.py's `ouster` extra for why
+# --no-deps).
+install-ouster: $(STAMP)
+	$(PY) -m pip install --quiet -e '.[ouster]'
+	$(PY) -m pip install --quiet --no-deps ouster-sdk==1.0.1
 
 test: $(STAMP)
 	$(PY) -m pytest -q test

@@ -20,7 +20,10 @@ setup(
         ("share/" + package_name + "/config", glob("config/*.yaml")),
         ("share/" + package_name + "/config/worlds", glob("config/worlds/*.yaml")),
         ("share/" + package_name + "/config/scenarios", glob("config/scenarios/*.yaml")),
+        ("share/" + package_name + "/config/dds", glob("config/dds/*.xml")),
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
+        ("share/" + package_name + "/rviz", glob("rviz/*.rviz")),
+        ("share/" + package_name + "/foxglove", glob("foxglove/*.json")),
     ],
     python_requires=">=3.10",
     install_requires=[
@@ -50,6 +53,13 @@ setup(
         "peers": ["genz-icp>=0.3", "rko-lio>=0.4"],
         # `lili-odom suite --backend ray`: the suite's jobs as tasks on a Ray cluster.
         "cluster": ["ray>=2.40"],
+        # Ouster recordings (lili-odom run RECORDING.pcap/.osf, test_ouster.py): the Ouster
+        # SDK's runtime dependencies. The SDK itself pins rosbags==0.9.23, which conflicts with
+        # rosbags>=0.10 above, so it is installed without its pins:
+        #   pip install '.[ouster]' && pip install --no-deps ouster-sdk==1.0.1
+        # (make install-ouster)
+        "ouster": ["click", "more-itertools", "nanobind", "packaging", "Pillow", "prettytable",
+                   "psutil", "requests", "threadpoolctl", "laspy", "zeroconf", "flask"],
     },
     zip_safe=True,
     maintainer="lili_odom maintainers",

@@ -87,6 +87,19 @@ class NodeConfig:
             QoS). Only for replays from a reliable publisher (``lili-odom play``, ``ros2 bag
             play`` of a reliable recording): a reliable subscription does not match the
             best-effort publishers of ouster-ros and most drivers.
+        diagnostics_publish_period: period of ``/diagnostics`` [s of wall time] (0: off).
+        lidar_rate_hz / imu_rate_hz / wheel_rate_hz: expected input rates [Hz] for
+            ``/diagnostics`` and the missing-scan count (gaps between scan stamps longer
+            than 1.5 LiDAR periods); 0: input not expected.
+        map_save_path: file ``~/save_map`` writes (``.pcd`` or ``.ply``; relative to the
+            node's working directory).
+        map_save_voxel: voxel size of the saved map [m].
+        map_save_max_points: points the saved map holds at most; beyond, its voxel size
+            grows by half (bounded memory).
+        map_accumulate_period_s: how often the local map is merged into the saved map [s of
+            stamp time].
+        publish_tf_inverse: publish ``base_frame -> odom_frame`` on ``/tf`` instead (for robots
+            whose own EKF owns ``odom -> base_link``).
     """
 
     lidar_topic: str = "/ouster/points"
@@ -104,6 +117,15 @@ class NodeConfig:
     scan_queue_size: int = 3
     scan_subscription_depth: int = 10
     reliable_inputs: bool = False
+    diagnostics_publish_period: float = 1.0
+    lidar_rate_hz: float = 10.0
+    imu_rate_hz: float = 100.0
+    wheel_rate_hz: float = 50.0
+    map_save_path: str = "lili_odom_map.pcd"
+    map_save_voxel: float = 0.2
+    map_save_max_points: int = 5000000
+    map_accumulate_period_s: float = 1.0
+    publish_tf_inverse: bool = False
     extrinsics: ExtrinsicsConfig = field(default_factory=ExtrinsicsConfig)
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
 
@@ -119,6 +141,16 @@ class NodeConfig:
                     unit="m")
         check_range("scan_queue_size", self.scan_queue_size, 1, 1000)
         check_range("scan_subscription_depth", self.scan_subscription_depth, 1, 1000)
+        check_range("diagnostics_publish_period", self.diagnostics_publish_period, 0.0, 3600.0,
+                    unit="s")
+        for name in ("lidar_rate_hz", "imu_rate_hz", "wheel_rate_hz"):
+            check_range(name, getattr(self, name), 0.0, 10000.0, unit="Hz")
+        if not str(self.map_save_path).lower().endswith((".pcd", ".ply")):
+            raise ValueError(f"map_save_path must end in .pcd or .ply, got {self.map_save_path!r}")
+        check_range("map_save_voxel", self.map_save_voxel, 0.0, 100.0, lo_open=True, unit="m")
+        check_range("map_save_max_points", self.map_save_max_points, 1, 10**9)
+        check_range("map_accumulate_period_s", self.map_accumulate_period_s, 0.0, 3600.0,
+                    unit="s")
         self.extrinsics.validate()
         _check_ranges(self)
         self.pipeline.fusion.validate("pipeline.fusion.")
@@ -341,7 +373,7 @@ def default_config_path() -> Path | None:
 #: generated ``config/lili_odom_advanced.yaml``.
 ROBOT_PARAMETERS: tuple[str, ...] = (
     "lidar_topic", "imu_topic", "wheel_topic", "odom_frame", "base_frame", "publish_tf",
-    "reliable_inputs", "scan_queue_size", "scan_subscription_depth",
+    "publish_tf_inverse", "map_save_path", "reliable_inputs", "scan_queue_size", "scan_subscription_depth",
     "extrinsics.base_to_sensor", "extrinsics.sensor_to_lidar", "extrinsics.sensor_to_imu",
     "extrinsics.use_tf_static", "pipeline.method",
 )

@@ -115,3 +115,38 @@ def test_play_bad_bag_is_one_line_error(tmp_path):
         assert len(lines) == 1 and lines[0].startswith("lili-odom play: error:"), res.stderr
     res = _play(bag, env, "--topics", "/nope")
     assert res.returncode == 2 and "/nope" in res.stderr
+
+
+def test_play_sensor_data_qos_publishes_best_effort_like_a_driver(tmp_path, monkeypatch):
+    bag = _tiny_bag(tmp_path / "tiny")
+    env = isolated_ros_env()
+    for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
+        monkeypatch.setenv(key, env[key])
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(env["ROS_DOMAIN_ID"]))
+    node = rclpy.create_node("play_listener", context=ctx)
+    got: list = []
+    node.create_subscription(message_class("sensor_msgs/msg/Imu"), "/ouster/imu", got.append,
+                             QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(node)
+    reliabilities = set()
+    try:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "lili_odom.cli", "play", str(bag), "--rate", "1",
+             "--delay", "15.0", "--clock-hz", "0", "--topics", "/ouster/imu",
+             "--qos", "sensor-data"],
+            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline and proc.poll() is None:
+            executor.spin_once(timeout_sec=0.05)
+            for info in node.get_publishers_info_by_topic("/ouster/imu"):
+                reliabilities.add(info.qos_profile.reliability)
+        _, err = proc.communicate(timeout=10)
+    finally:
+        executor.shutdown(timeout_sec=2.0)
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    assert proc.returncode == 0, err
+    assert reliabilities == {ReliabilityPolicy.BEST_EFFORT}, reliabilities
+    assert len(got) >= N_IMU - 1, len(got)  # best effort on loopback: (nearly) all arrive

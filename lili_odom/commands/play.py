@@ -11,9 +11,16 @@ as possible). ``/clock`` carries the bag log time of the playback position at ``
 (wall rate), so nodes with ``use_sim_time`` follow the bag. With ``--loop`` the clock jumps
 back to the start on every pass, as ``ros2 bag play --loop`` does.
 
-QoS: every publisher is RELIABLE (so reliable *and* best-effort subscribers match) with
-KEEP_LAST depth ``--qos-depth``; latched topics (``/tf_static`` and topics recorded as
-transient-local) are published TRANSIENT_LOCAL.
+QoS (``--qos``): ``reliable`` (default): every publisher is RELIABLE (so reliable *and*
+best-effort subscribers match) with KEEP_LAST depth ``--qos-depth``, a lossless replay;
+``sensor-data``: data topics are published BEST_EFFORT as a LiDAR driver does (ouster-ros's
+sensor-data QoS), so the replay shows what the node sees on the robot. Latched topics
+(``/tf_static`` and topics recorded as transient-local) are always RELIABLE +
+TRANSIENT_LOCAL.
+
+DDS: like ``lili_odom_node``, the player loads the package's Fast DDS profile
+(:mod:`lili_odom.ros.dds`: a shared-memory segment large enough for full-resolution clouds)
+unless the environment already names one.
 """
 from __future__ import annotations
 
@@ -41,6 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="wait up to S wall seconds after creating publishers, until every "
                         "topic has a matched subscriber, before the first message")
     parser.add_argument("--qos-depth", type=int, default=20, help="publisher history depth")
+    parser.add_argument("--qos", choices=("reliable", "sensor-data"), default="reliable",
+                        help="publisher reliability: reliable (lossless replay, default) or "
+                        "sensor-data (best effort, like a LiDAR driver)")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
 
 
@@ -75,12 +85,14 @@ def _play(reader, args: argparse.Namespace, rate: float) -> int:
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
 
+    from lili_odom.ros.dds import apply_dds_defaults
     from lili_odom.ros.factory import MessageTypeError, message_class
 
     def log(text: str) -> None:
         if not args.quiet:
             print(text, file=sys.stderr, flush=True)
 
+    apply_dds_defaults()
     context = rclpy.Context()
     rclpy.init(args=None, context=context)
     node = None
@@ -103,7 +115,9 @@ def _play(reader, args: argparse.Namespace, rate: float) -> int:
                 # (or a lost packet to repair) does not lose samples; clouds keep --qos-depth
                 depth=(args.qos_depth if msgtype == "sensor_msgs/msg/PointCloud2"
                        else max(args.qos_depth, 1000)),
-                reliability=ReliabilityPolicy.RELIABLE,
+                reliability=(ReliabilityPolicy.BEST_EFFORT
+                             if args.qos == "sensor-data" and topic not in latched
+                             else ReliabilityPolicy.RELIABLE),
                 durability=(DurabilityPolicy.TRANSIENT_LOCAL if topic in latched
                             else DurabilityPolicy.VOLATILE),
             )
@@ -147,7 +161,10 @@ def _play(reader, args: argparse.Namespace, rate: float) -> int:
         from rclpy.duration import Duration
 
         unacked = [t for t, p in publishers.items()
-                   if p.get_subscription_count() and not p.wait_for_all_acked(Duration(seconds=2.0))]
+                   if args.qos == "reliable" and p.get_subscription_count()
+                   and not p.wait_for_all_acked(Duration(seconds=2.0))]
+        if args.qos == "sensor-data":
+            time.sleep(0.5)  # best effort: let the last samples leave before the writers go
         if unacked:
             log(f"lili-odom play: not acknowledged by every subscriber: {', '.join(unacked)}")
         log(f"lili-odom play: published {total} messages on {len(publishers)} topics "

@@ -25,6 +25,7 @@ import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -50,6 +51,7 @@ class OfflineRun:
     reused: list[bool] = field(default_factory=list)
     timings: dict[str, list[float]] = field(default_factory=dict)
     summary: dict = field(default_factory=dict)
+    map_path: str = ""  # the saved map (save_map), absolute
 
     @property
     def stamps(self) -> np.ndarray:
@@ -87,8 +89,15 @@ def _vector(v: np.ndarray | None, n: int = 3) -> list[float]:
 
 def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: int = 0,
             rpe_segment: float = 100.0, progress: bool = True,
-            progress_label: str = "odometry") -> OfflineRun:
+            progress_label: str = "odometry", reader: Any = None,
+            save_map: Path | str | None = None, map_voxel: float = 0.2) -> OfflineRun:
     """Run the odometry over ``bag`` and write the outputs listed in the module docstring.
+
+    ``reader``: another message source than the bag (e.g.
+    :class:`lili_odom.io.ouster.OusterRecording`): a context manager with ``message_count``
+    yielding items with ``topic`` and ``msg``. ``save_map``: also write the accumulated map
+    (:class:`lili_odom.io.map_file.MapAccumulator`, ``map_voxel`` [m]) to this ``.pcd`` /
+    ``.ply`` file, as the node's ``~/save_map`` does.
 
     Raises:
         UserError: unreadable bag, missing LiDAR topic, unusable ``out_dir``, no scan processed.
@@ -110,11 +119,21 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
     topics = [config.lidar_topic, config.imu_topic, config.wheel_topic, config.ground_truth_topic,
               "/tf_static"]
     run = OfflineRun(method=config.pipeline.method)
+    accumulator = None
+    if save_map is not None:
+        from lili_odom.io.map_file import MAP_SUFFIXES, MapAccumulator
+
+        if Path(save_map).suffix.lower() not in MAP_SUFFIXES:
+            raise UserError(f"{save_map}: map files are .pcd or .ply")
+        accumulator = MapAccumulator(map_voxel)
+    last_accumulated = [-float("inf")]
     rows: list[list[float]] = []
     replay = Replay(config)
     pipeline = replay.pipeline
     t_wall = time.perf_counter()
-    with BagReader(bag, topics=topics, required=[config.lidar_topic]) as reader, \
+    source = reader if reader is not None else BagReader(bag, topics=topics,
+                                                          required=[config.lidar_topic])
+    with source as reader, \
             OutputBagWriter(out_dir / "odometry", odom_frame=config.odom_frame,
                             base_frame=config.base_frame) as writer:
         bar = _Progress(reader.message_count, not progress, progress_label)
@@ -136,6 +155,9 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
                          *_vector(out.details.get("gyro_bias")),
                          *_vector(out.details.get("gravity_tilt"), 2)])
             writer.write_output(out)
+            if accumulator is not None and out.stamp - last_accumulated[0] >= 1.0:
+                accumulator.add(pipeline.local_map_points())
+                last_accumulated[0] = out.stamp
 
         def advancing(items):
             for item in items:
@@ -148,6 +170,15 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
         bar.close()
         if run.estimates:
             writer.write_map(pipeline.local_map_points(), run.estimates[-1][0])
+            if accumulator is not None:
+                from lili_odom.io.map_file import save_points
+
+                accumulator.add(pipeline.local_map_points())
+                try:
+                    run.map_path = str(save_points(save_map, accumulator.points()))
+                except OSError as exc:
+                    raise UserError(f"{save_map}: cannot write the map: "
+                                    f"{exc.strerror or exc}") from None
     wall = time.perf_counter() - t_wall
     if not run.estimates:
         raise UserError(f"{bag}: no scan could be processed ({dict(pipeline.counters)})")

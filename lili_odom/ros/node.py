@@ -18,8 +18,21 @@ every processed scan), ``~/path`` (Path, every ``path_period`` s of stamp time, 
 ``odom_frame``, reliable + transient-local depth 1, every ``map_publish_period_s`` s of stamp
 time), ``~/degeneracy`` (MarkerArray,
 see :func:`lili_odom.messages.degeneracy_markers`), ``~/degeneracy/basis`` (JSON String, see
-:func:`lili_odom.messages.degeneracy_basis_dict`) and ``/tf`` (``odom_frame`` ->
-``base_frame``) when ``publish_tf`` is true and ``tf2_msgs`` is importable.
+:func:`lili_odom.messages.degeneracy_basis_dict`), ``/tf`` (``odom_frame`` -> ``base_frame``,
+or the inverse with ``publish_tf_inverse``) when ``publish_tf`` is true and ``tf2_msgs`` is
+importable, and ``/diagnostics`` (DiagnosticArray every ``diagnostics_publish_period`` s of
+wall time, statuses from :class:`lili_odom.ros.health.HealthMonitor`).
+
+Service ``~/save_map`` (``std_srvs/srv/Trigger``): writes the accumulated map
+(:class:`lili_odom.io.map_file.MapAccumulator`: the local map merged every
+``map_accumulate_period_s`` s of stamp time, voxel size ``map_save_voxel``, at most
+``map_save_max_points`` points) to ``map_save_path`` (``.pcd`` / ``.ply``); the answer's
+``message`` is the absolute path written, or the error with ``success`` false.
+
+Missing scans: a gap between consecutive scan stamps longer than 1.5 periods of
+``lidar_rate_hz`` counts the scans lost before the node (``scans_missing``, logged, in
+``/diagnostics``); DDS: ``main`` loads the package's Fast DDS profile unless the environment
+chose one (:mod:`lili_odom.ros.dds`, docs/ros.md).
 
 Threading: callbacks run on a single-threaded executor and only buffer (IMU, wheel,
 ``/tf_static``) or hand over (scans), so they are never starved by processing. One worker
@@ -66,9 +79,12 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityP
 from rcl_interfaces.msg import ParameterDescriptor
 
 from lili_odom import messages as M
+from lili_odom.io.map_file import MapAccumulator, save_points
 from lili_odom.pipeline.feeder import MessageFeeder
 from lili_odom.pipeline.types import OdometryOutput
+from lili_odom.ros.dds import apply_dds_defaults
 from lili_odom.ros.factory import MessageTypeError, RclpyFactory, message_class
+from lili_odom.ros.health import HealthConfig, HealthMonitor
 from lili_odom.ros.provider import OdometryPipelineProvider, PipelineLike, PipelineProvider
 from lili_odom.ros.queues import SampleBuffer, ScanQueue
 
@@ -92,6 +108,15 @@ NODE_PARAMETERS: dict[str, Any] = {
     "scan_queue_size": 3,
     "scan_subscription_depth": 10,
     "reliable_inputs": False,
+    "diagnostics_publish_period": 1.0,
+    "lidar_rate_hz": 10.0,
+    "imu_rate_hz": 100.0,
+    "wheel_rate_hz": 50.0,
+    "map_save_path": "lili_odom_map.pcd",
+    "map_save_voxel": 0.2,
+    "map_save_max_points": 5000000,
+    "map_accumulate_period_s": 1.0,
+    "publish_tf_inverse": False,
 }
 
 
@@ -146,8 +171,16 @@ class LiliOdomNode(Node):
         self.counters: dict[str, int] = {
             "scans_received": 0, "scans_processed": 0, "scans_dropped": 0,
             "scans_no_output": 0, "scan_errors": 0, "imu_received": 0, "wheel_received": 0,
-            "resets": 0,
+            "resets": 0, "scans_missing": 0,
         }
+        self.health = HealthMonitor(HealthConfig(lidar_hz=float(self.p["lidar_rate_hz"]),
+                                                 imu_hz=float(self.p["imu_rate_hz"]),
+                                                 wheel_hz=float(self.p["wheel_rate_hz"])))
+        self.map = MapAccumulator(float(self.p["map_save_voxel"]),
+                                  int(self.p["map_save_max_points"]))
+        self._map_lock = threading.Lock()
+        self._map_requests: list[threading.Event] = []  # served by the worker
+        self._last_accumulate_stamp = -float("inf")
         self._processing_time = 0.0
         self._scans = ScanQueue(int(self.p["scan_queue_size"]))
         self._inputs = SampleBuffer(maxlen=30000)  # (topic, msg): IMU, wheel, /tf_static
@@ -195,6 +228,16 @@ class LiliOdomNode(Node):
                 self.create_subscription(tf_cls, "/tf_static", self._on_tf_static,
                                          _reliable_qos(100, latched=True))
 
+        self.pub_diagnostics = self.create_publisher(
+            message_class("diagnostic_msgs/msg/DiagnosticArray"), "/diagnostics",
+            _reliable_qos(10))
+        self._hardware_id = f"{self.get_namespace().rstrip('/')}/{self.get_name()}"
+        diag_period = float(self.p["diagnostics_publish_period"])
+        if diag_period > 0:
+            self.create_timer(diag_period, self.publish_diagnostics,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.create_service(message_class("std_srvs/srv/Trigger"), "~/save_map",
+                            self._on_save_map)
         period = float(self.p["diagnostics_period"])
         if period > 0:
             self.create_timer(period, self._log_diagnostics,
@@ -231,8 +274,19 @@ class LiliOdomNode(Node):
 
     def _on_scan(self, msg: Any) -> None:
         self.counters["scans_received"] += 1
+        try:
+            missing = self.health.on_scan(M.stamp_seconds(msg.header))
+        except (AttributeError, TypeError, ValueError):
+            missing = 0
+        if missing:
+            self.counters["scans_missing"] += missing
+            self.get_logger().warn(
+                f"{missing} scan(s) missing before stamp {M.stamp_seconds(msg.header):.3f} "
+                f"({self.counters['scans_missing']} so far): lost between the LiDAR driver "
+                "and this node (see docs/ros.md, DDS profile)", throttle_duration_sec=5.0)
         if self._scans.put(msg):
             self.counters["scans_dropped"] = self._scans.dropped
+            self.health.on_dropped()
             self.get_logger().warn(
                 f"processing slower than the LiDAR: dropped {self._scans.dropped} older "
                 f"scan(s) so far (at most {self._scans.maxlen} scans wait; the oldest goes)",
@@ -240,10 +294,12 @@ class LiliOdomNode(Node):
 
     def _on_imu(self, msg: Any) -> None:
         self.counters["imu_received"] += 1
+        self.health.on_imu()
         self._inputs.append((self.p["imu_topic"], msg))
 
     def _on_wheel(self, msg: Any) -> None:
         self.counters["wheel_received"] += 1
+        self.health.on_wheel()
         self._inputs.append((self.p["wheel_topic"], msg))
 
     def _on_tf_static(self, msg: Any) -> None:
@@ -266,10 +322,12 @@ class LiliOdomNode(Node):
                 self.get_logger().error(f"scan processing failed: {type(exc).__name__}: {exc}",
                                         throttle_duration_sec=5.0)
             self._processing_time += time.perf_counter() - t0
+            self._serve_map_requests()
 
     def _step(self, msg: Any, wait_wall: float) -> None:
         """Feed the buffered inputs, then the scan (if any); publish what comes out."""
         feeder = self._feeder
+        t_step = time.perf_counter()
         before = feeder.processed
         outputs = []
         for topic, item in self._inputs.drain():
@@ -285,6 +343,9 @@ class LiliOdomNode(Node):
                 feeder.restart()
                 self._path.clear()
                 self._last_path_stamp = self._last_map_stamp = -float("inf")
+                self._last_accumulate_stamp = -float("inf")
+                with self._map_lock:
+                    self.map.clear()  # a new odometry frame: the old map does not fit it
                 self.counters["resets"] += 1
             self._last_stamp = stamp
             outputs += feeder.feed(self.p["lidar_topic"], msg)
@@ -299,6 +360,11 @@ class LiliOdomNode(Node):
         processed = feeder.processed - before
         self.counters["scans_processed"] += processed
         self.counters["scans_no_output"] += processed - len(outputs)
+        if processed:
+            seconds = (time.perf_counter() - t_step) / processed
+            for k in range(processed):
+                self.health.on_processed(seconds, outputs[k] if k < len(outputs) else None)
+            self.health.on_pipeline_counters(dict(getattr(self.pipeline, "counters", {}) or {}))
         self._publish_all(outputs)
 
     def _publish_all(self, outputs: list[OdometryOutput]) -> None:
@@ -313,7 +379,11 @@ class LiliOdomNode(Node):
                                                       float(p["marker_arrow_length"])))
         self.pub_basis.publish(M.degeneracy_json_msg(f, out))
         if self.pub_tf is not None:
-            self.pub_tf.publish(M.tf_message(f, [(out.stamp, frame, p["base_frame"], out.pose)]))
+            if p["publish_tf_inverse"]:
+                tf = (out.stamp, p["base_frame"], frame, np.linalg.inv(out.pose))
+            else:
+                tf = (out.stamp, frame, p["base_frame"], out.pose)
+            self.pub_tf.publish(M.tf_message(f, [tf]))
         self._path.append((out.stamp, np.asarray(out.pose, dtype=np.float64)))
         if out.stamp - self._last_path_stamp >= float(p["path_period"]):
             from lili_odom.bagio.writer import thin_poses
@@ -325,10 +395,65 @@ class LiliOdomNode(Node):
             from lili_odom.bagio.writer import thin_poses
 
             self._path = thin_poses(self._path, 2 * int(p["path_max_poses"]))
+        points = None
         if out.stamp - self._last_map_stamp >= float(p["map_publish_period_s"]):
             points = np.asarray(self.pipeline.local_map_points(), dtype=np.float64)
             self.pub_map.publish(M.pointcloud_xyz_msg(f, points, out.stamp, frame))
             self._last_map_stamp = out.stamp
+        if out.stamp - self._last_accumulate_stamp >= float(p["map_accumulate_period_s"]):
+            self._accumulate_map(points)
+            self._last_accumulate_stamp = out.stamp
+
+    # -- the saved map -------------------------------------------------------------------
+
+    def _accumulate_map(self, points: np.ndarray | None = None) -> None:
+        """Merge the local map (odometry frame, fused poses) into the saved map."""
+        if points is None:
+            points = np.asarray(self.pipeline.local_map_points(), dtype=np.float64)
+        with self._map_lock:
+            coarsened = self.map.coarsened
+            self.map.add(points)
+            if self.map.coarsened != coarsened:
+                self.get_logger().warn(
+                    f"saved map reached map_save_max_points ({self.map.max_points}): voxel "
+                    f"size now {self.map.voxel_size:.3f} m")
+
+    def _serve_map_requests(self) -> None:
+        """Worker thread: merge the current local map for waiting ``save_map`` calls (only
+        the worker touches the pipeline)."""
+        with self._map_lock:
+            requests, self._map_requests = self._map_requests, []
+        if requests:
+            try:
+                self._accumulate_map()
+            finally:
+                for done in requests:
+                    done.set()
+
+    def save_map(self, path: str | None = None, wait_s: float = 2.0) -> str:
+        """Write the accumulated map to ``path`` (default: parameter ``map_save_path``);
+        returns the absolute path. The worker first merges the current local map (waited for
+        up to ``wait_s``; a worker busy longer leaves the map as of its last merge).
+        Raises ValueError / OSError."""
+        done = threading.Event()
+        with self._map_lock:
+            self._map_requests.append(done)
+        if self._worker.is_alive():
+            done.wait(wait_s)
+        with self._map_lock:
+            points = self.map.points()
+        return str(save_points(path or self.p["map_save_path"], points))
+
+    def _on_save_map(self, request: Any, response: Any) -> Any:
+        try:
+            response.message = self.save_map()
+            response.success = True
+            self.get_logger().info(f"map saved: {response.message} ({len(self.map)} points)")
+        except Exception as exc:  # noqa: BLE001 - a failed save answers, never kills the node
+            response.success = False
+            response.message = f"{type(exc).__name__}: {exc}"
+            self.get_logger().error(f"save_map failed: {response.message}")
+        return response
 
     # -- diagnostics and shutdown --------------------------------------------------------
 
@@ -344,6 +469,32 @@ class LiliOdomNode(Node):
         for k, v in dict(getattr(self.pipeline, "counters", {}) or {}).items():
             out[f"pipeline.{k}"] = v
         return out
+
+    def diagnostic_statuses(self) -> list:
+        """The ``/diagnostics`` statuses now (:class:`lili_odom.ros.health.Status`)."""
+        return self.health.statuses(self.diagnostics())
+
+    def publish_diagnostics(self) -> None:
+        """Publish one ``diagnostic_msgs/DiagnosticArray`` on ``/diagnostics``."""
+        f = self._factory
+        try:
+            statuses = self.diagnostic_statuses()
+        except Exception as exc:  # noqa: BLE001 - monitoring must not stop the node
+            self.get_logger().error(f"diagnostics failed: {type(exc).__name__}: {exc}",
+                                    throttle_duration_sec=10.0)
+            return
+        now = self.get_clock().now().nanoseconds * 1e-9
+        status_msgs = []
+        for s in statuses:
+            st = f.new("diagnostic_msgs/msg/DiagnosticStatus", name=s.name, message=s.message,
+                       hardware_id=self._hardware_id,
+                       values=[f.new("diagnostic_msgs/msg/KeyValue", key=k, value=v)
+                               for k, v in s.values.items()])
+            st.level = bytes([s.level])  # octet: rclpy wants one byte
+            status_msgs.append(st)
+        msg = f.new("diagnostic_msgs/msg/DiagnosticArray", header=M.header_msg(f, now, ""),
+                    status=status_msgs)
+        self.pub_diagnostics.publish(msg)
 
     def _log_diagnostics(self) -> None:
         self.get_logger().info("diagnostics " + json.dumps(self.diagnostics(), default=str))
@@ -362,7 +513,11 @@ class LiliOdomNode(Node):
 
 def main(args: list[str] | None = None,
          provider_factory: Callable[[], PipelineProvider] | None = None) -> int:
-    """Console entry point ``lili_odom_node`` (accepts ``--ros-args ...``)."""
+    """Console entry point ``lili_odom_node`` (accepts ``--ros-args ...``).
+
+    Loads the package's Fast DDS profile (:mod:`lili_odom.ros.dds`) unless the environment
+    already chose one."""
+    profile = apply_dds_defaults()
     rclpy.init(args=args)
     node = None
     try:
@@ -371,6 +526,8 @@ def main(args: list[str] | None = None,
         except (ImportError, RuntimeError, ValueError, TypeError) as exc:
             print(f"lili_odom_node: error: {type(exc).__name__}: {exc}", file=sys.stderr)
             return 1
+        if profile:
+            node.get_logger().info(f"DDS profile: {profile}")
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()
