@@ -19,8 +19,8 @@ Cases named with ``--cases`` replace their rows in an existing result file.
 
 Writes ``benchmarks/results/dds_large_clouds.json`` and ``.md``.
 
-    python benchmarks/dds_large_clouds.py                 # all cases, 100 clouds each (~3 min)
-    python benchmarks/dds_large_clouds.py --count 50 --cases fastdds_default profile_both
+    python -m benchmarks.dds_large_clouds                 # all cases, 100 clouds each (~3 min)
+    python -m benchmarks.dds_large_clouds --count 50 --cases fastdds_default profile_both
 """
 from __future__ import annotations
 
@@ -34,11 +34,8 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "benchmarks" / "results"
-sys.path.insert(0, str(ROOT))
-
-from lili_odom.ros.dds import profile_path  # noqa: E402
+from benchmarks._common import RESULTS, ROOT
+from lili_odom.ros.dds import profile_path
 
 CASES = {
     # name: (publisher env, subscriber env, publisher qos, reliable subscription)
@@ -99,7 +96,7 @@ def run_case(name: str, count: int, rate: float, height: int, width: int) -> dic
 
 def render(doc: dict) -> str:
     lines = ["# Full-resolution clouds across processes (DDS)", "",
-             f"`python benchmarks/dds_large_clouds.py` on {doc['machine']}; "
+             f"`python -m benchmarks.dds_large_clouds` on {doc['machine']}; "
              f"{doc['height']} x {doc['width']} clouds ({doc['bytes_per_cloud'] / 1e6:.1f} MB) "
              f"at {doc['rate_hz']:g} Hz, {doc['count']} per case, Fast DDS {doc['fastdds']}.", "",
              "| case | publisher QoS | subscription | received | fraction |",

@@ -35,25 +35,16 @@ POSES = "OS-1-128_v2.3.0_1024x10_lb_n3_poses_kitti.txt"
 
 
 def ouster_pair(folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """First two frames of the real OS1-128 recording (sensor frame, no-return pixels dropped)
-    and the reference motion between them; None when the data or ouster-sdk is absent."""
-    if not (folder / PCAP).exists():
+    """First two frames of the real OS1-128 recording (``os_sensor``) and the reference motion
+    between them; None when the data or the Ouster SDK is absent."""
+    from lili_odom.io.ouster import sdk_available, sensor_frame_points
+
+    if not (folder / PCAP).exists() or not sdk_available():
         return None
-    try:
-        from ouster.sdk import core, open_source
-    except ImportError:
-        return None
-    source = open_source(str(folder / PCAP), meta=[str(folder / META)])
-    lut = core.XYZLut(source.sensor_info[0])
-    clouds = []
-    for frames in source:
-        xyz = lut(frames[0].field(core.ChanField.RANGE)).reshape(-1, 3)
-        clouds.append(xyz[np.linalg.norm(xyz, axis=1) > 0])
-        if len(clouds) == 2:
-            break
+    first, second = sensor_frame_points(folder / PCAP, folder / META, count=2)
     poses = np.loadtxt(folder / POSES).reshape(-1, 3, 4)
     T = [np.vstack([p, [0.0, 0.0, 0.0, 1.0]]) for p in poses[:2]]
-    return clouds[0], clouds[1], np.linalg.inv(T[0]) @ T[1]
+    return first, second, np.linalg.inv(T[0]) @ T[1]
 
 
 def cell(name: str, noise: str, reference, scan, initial, method: str, truth=None) -> dict:

@@ -9,7 +9,7 @@ detected dimension. Needs the Ouster SDK.
 
 Writes ``benchmarks/results/ouster_recording.json`` and ``.md``.
 
-    python benchmarks/ouster_recording.py
+    python -m benchmarks.ouster_recording
 """
 from __future__ import annotations
 
@@ -70,7 +70,7 @@ def main() -> int:
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "ouster_recording.json").write_text(json.dumps(doc, indent=1) + "\n")
     lines = ["# Odometry on the real OS1-128 recording", "",
-             f"`python benchmarks/ouster_recording.py`: `{PCAP.name}` (3 frames), estimated "
+             f"`python -m benchmarks.ouster_recording`: `{PCAP.name}` (3 frames), estimated "
              "positions against the Ouster SDK's reference poses.", "",
              "| variant | error per frame [m] | step [m] | reference step [m] | dimension |",
              "|---|---|---|---|---|"]

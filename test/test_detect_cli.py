@@ -113,14 +113,14 @@ def test_detect_on_the_real_os1_pair_is_constrained_and_registers():
     pytest.importorskip("ouster.sdk")
     if not (OUSTER / "OS-1-128_v2.3.0_1024x10_lb_n3.pcap").exists():
         pytest.skip("real Ouster recordings not present")
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from detect_inputs import ouster_pair
-
     from lili_odom.degeneracy.detection_input import odometry_detector, prepare
+    from lili_odom.io.ouster import sensor_frame_points
 
-    reference, scan, truth = ouster_pair(OUSTER)
+    reference, scan = sensor_frame_points(OUSTER / "OS-1-128_v2.3.0_1024x10_lb_n3.pcap",
+                                          OUSTER / "OS-1-128_v2.3.0_1024x10.json", count=2)
+    poses = np.loadtxt(OUSTER / "OS-1-128_v2.3.0_1024x10_lb_n3_poses_kitti.txt").reshape(-1, 3, 4)
+    T0, T1 = (np.vstack([p, [0.0, 0.0, 0.0, 1.0]]) for p in poses[:2])
+    truth = np.linalg.inv(T0) @ T1
     prepared = prepare(reference, scan)
     assert prepared.voxel_size == pytest.approx(1.0)
     for method in ("lili", "zhang"):

@@ -6,7 +6,7 @@ with no DDS variables set, so it loads the package's Fast DDS profile as ``lili-
 and ``lili_odom_node`` do; the node (fake pipeline, default subscription QoS) runs in-process.
 At least 99 % of the clouds must reach the node, and the node's missing-scan count must
 account for the ones that did not. (With Fast DDS's own defaults most of them are lost:
-``benchmarks/dds_large_clouds.py`` measures both.) Isolated domain, localhost only.
+``benchmarks.dds_large_clouds`` measures both.) Isolated domain, localhost only.
 """
 from __future__ import annotations
 

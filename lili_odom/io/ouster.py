@@ -29,7 +29,7 @@ import numpy as np
 from lili_odom.errors import UserError
 
 __all__ = ["LAYOUTS", "RecordingMessage", "OusterRecording", "frame_to_cloud_fields",
-           "cloud_message", "sdk_available"]
+           "cloud_message", "sdk_available", "sensor_frame_points"]
 
 # layout -> (point_step, [(name, offset, numpy type, PointField datatype)])
 LAYOUTS: dict[str, tuple[int, list[tuple[str, int, str, int]]]] = {
@@ -302,3 +302,24 @@ class OusterRecording:
                              key=lambda x: (x[0], x[1]))
         for _, _, m in merged:
             yield m
+
+
+def sensor_frame_points(path: str | Path, metadata: str | Path | None = None,
+                        count: int = 1) -> list[np.ndarray]:
+    """The first ``count`` frames of a recording as (N, 3) points [m] in ``os_sensor`` (the
+    frame of the SDK's XYZ look-up table and of its reference poses), no-return pixels
+    dropped. Raises :class:`~lili_odom.errors.UserError` when the SDK or the file is missing."""
+    sdk = _sdk()
+    try:
+        source = (sdk.open_source(str(path), meta=[str(metadata)]) if metadata
+                  else sdk.open_source(str(path)))
+        lut = sdk.core.XYZLut(source.sensor_info[0])
+        clouds = []
+        for frames in source:
+            xyz = np.asarray(lut(frames[0].field(sdk.core.ChanField.RANGE))).reshape(-1, 3)
+            clouds.append(xyz[np.linalg.norm(xyz, axis=1) > 0])
+            if len(clouds) >= count:
+                break
+    except (OSError, RuntimeError, ValueError) as exc:
+        raise UserError(f"{path}: cannot read the recording: {exc}") from None
+    return clouds
