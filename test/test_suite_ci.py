@@ -79,3 +79,19 @@ def test_ci_peers_run_in_the_same_frame(tmp_path):
     for m in ("kiss", "genz"):
         _, poses = read_tum(out / "runs" / CI[0] / "seed{}".format(rows[m]["seed"]) / m / "estimate_base.tum")
         assert abs(poses[0, :3, 3]).max() < 1e-6
+
+
+def test_users_bags_are_rows_of_split_user(tmp_path):
+    """``--bags``: a recorded bag with a truth topic is run like a scenario (here the wheel
+    odometry on the first CI piece's bag)."""
+    from lili_odom.suite.backends import LocalBackend
+    from lili_odom.suite.scenario import load_scenarios, scenario_bag
+
+    (sc,) = load_scenarios([CI[0]])
+    bag = scenario_bag(sc, sc.seeds[0], ci=True, progress=False)
+    request = SuiteRequest(out=tmp_path / "user", bags=[bag], methods=["wheels"])
+    doc = run_suite(request, LocalBackend(jobs=1), progress=False)
+    (row,) = doc["rows"]
+    assert row["split"] == "user" and row["scenario"] == bag.name
+    assert "error" not in row and math.isfinite(row["ate_m"]) and row["distance_m"] > 5.0
+    assert "## User scenarios" in (tmp_path / "user" / "suite.md").read_text()

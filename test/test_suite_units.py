@@ -174,3 +174,22 @@ def test_markdown_reports_splits_apart_and_bolds_the_best(tmp_path):
     assert v_table.index("| **none** | 0.300") < v_table.index("| lili | 0.500")
     assert "1 failed: crashed" in md
     assert "`lili-odom suite --preset ci`" in md
+
+
+def test_a_hanging_job_is_stopped_and_reported(tmp_path):
+    """A job that never finishes (its bag's metadata is a FIFO nobody writes) is stopped at the
+    timeout; its row says so and its process is gone."""
+    import os
+
+    from lili_odom.suite.backends import LocalBackend
+
+    bag = tmp_path / "hanging"
+    bag.mkdir()
+    os.mkfifo(bag / "metadata.yaml")
+    backend = LocalBackend(jobs=1, timeout_s=5.0)
+    try:
+        row = backend.submit(_job(tmp_path, bag)).result(timeout=120)
+    finally:
+        backend.shutdown()
+    assert row["error"] == "timed out after 5 s"
+    assert not backend._running

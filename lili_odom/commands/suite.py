@@ -56,6 +56,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="override a parameter of our methods (e.g. lili.k=3); repeatable")
     parser.add_argument("--rpe-segment", type=float, default=10.0, help="RPE segment [m] (default 10)")
     parser.add_argument("--out", type=Path, default=Path("suite_output"), help="output directory")
+    parser.add_argument("--work-dir", type=Path, default=None,
+                        help="per-run files: trajectories, our runs' outputs (default OUT/runs)")
     parser.add_argument("--jobs", type=int, default=None,
                         help="jobs at the same time (default: min(2, cores))")
     parser.add_argument("--backend", choices=BACKENDS, default="local",
@@ -149,6 +151,7 @@ def run(args: argparse.Namespace) -> int:
         truth_topic=args.truth_topic, config_path=str(args.config) if args.config else None,
         overrides=overrides, rpe_segment_m=args.rpe_segment,
         cache_dir=str(args.cache_dir) if args.cache_dir else None, resume=args.resume,
+        work_dir=args.work_dir,
         command=command)
     if args.backend != "ray" and args.address:
         raise UserError("--address needs --backend ray")
@@ -191,4 +194,6 @@ def _describe(args: argparse.Namespace, methods: list[str], peers: list[str]) ->
     if args.config:
         parts += ["--config", str(args.config)]
     parts += ["--out", str(args.out)]
+    if args.work_dir:
+        parts += ["--work-dir", str(args.work_dir)]
     return " ".join(shlex.quote(p) for p in parts)

@@ -49,7 +49,9 @@ class Backend(Protocol):
 
 
 def _child_main(job: Job, conn, log_path: str) -> None:
-    """Entry point of a job's process: run it, send its row back."""
+    """Entry point of a job's process: run it, send its row back. Ctrl-C is the driver's to
+    handle (it stops the job), so the job ignores SIGINT."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         Path(log_path).parent.mkdir(parents=True, exist_ok=True)
         fd = os.open(log_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)

@@ -34,7 +34,8 @@ class SuiteFile:
     """``suite.json``, rewritten (atomically) after every row."""
 
     def __init__(self, path: Path, *, backend: str, command: str, preset: str,
-                 rpe_segment_m: float, scenarios: dict, resume: bool = False) -> None:
+                 rpe_segment_m: float, scenarios: dict, resume: bool = False,
+                 work_dir: Path | None = None) -> None:
         self.path = Path(path)
         rows: list[dict] = []
         old_scenarios: dict = {}
@@ -52,6 +53,8 @@ class SuiteFile:
             "rpe_segment_m": rpe_segment_m,
             "started_utc": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S"),
             "wall_time_s": None,
+            "work_dir": _relative(work_dir if work_dir is not None else self.path.parent / "runs",
+                                  self.path.parent),
             "scenarios": {**old_scenarios, **scenarios},
             "rows": rows,
         }
@@ -76,6 +79,14 @@ class SuiteFile:
         tmp = self.path.with_name(f".{self.path.name}.tmp")
         tmp.write_text(json.dumps(self.document, indent=1, allow_nan=False) + "\n")
         os.replace(tmp, self.path)
+
+
+def _relative(path: Path, start: Path) -> str:
+    """``path`` relative to ``start`` when it can be (keeps machine paths out of the file)."""
+    try:
+        return os.path.relpath(Path(path).resolve(), Path(start).resolve())
+    except ValueError:
+        return str(path)
 
 
 def validate_row(row: dict) -> None:
@@ -247,13 +258,15 @@ def figure(path: Path, title: str, run_dir: Path, methods: list[str]) -> bool:
 
 
 def write_report(out: Path, document: dict) -> None:
-    """``suite.md`` and the figures of a suite document (rows in ``out/runs``)."""
+    """``suite.md`` and the figures of a suite document (per-run files in its ``work_dir``,
+    relative to ``out``)."""
     out = Path(out)
     rows = document.get("rows", [])
+    work = out / document.get("work_dir", "runs")
     for name in dict.fromkeys(r["scenario"] for r in rows):
         seeds = sorted({r["seed"] for r in rows if r["scenario"] == name})
         methods = list(dict.fromkeys(r["method"] for r in rows if r["scenario"] == name))
         if seeds:
             figure(out / f"{name}.png", f"{name} (seed {seeds[0]}), aligned as for the ATE",
-                   out / "runs" / name / f"seed{seeds[0]}", methods)
+                   work / name / f"seed{seeds[0]}", methods)
     (out / "suite.md").write_text(markdown(document))

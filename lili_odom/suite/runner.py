@@ -40,7 +40,8 @@ class SuiteRequest:
         truth_topic: ground-truth topic (``nav_msgs/Odometry`` of base_link).
         config_path / overrides: configuration of our methods.
         rpe_segment_m: RPE segment [m].
-        out: output directory.
+        out: output directory (``suite.json``, ``suite.md``, figures).
+        work_dir: per-run files (trajectories, our runner's outputs; default ``out/runs``).
         cache_dir: simulator cache (None: ``$LILI_ODOM_SIM_CACHE`` or ``data/sim``).
         resume: keep the successful rows of an existing ``suite.json`` and skip their jobs.
         command: the command line, recorded in the outputs.
@@ -59,6 +60,7 @@ class SuiteRequest:
     overrides: list[tuple[str, str]] = field(default_factory=list)
     rpe_segment_m: float = 10.0
     cache_dir: str | None = None
+    work_dir: Path | None = None
     resume: bool = False
     command: str = ""
 
@@ -127,10 +129,10 @@ def plan_targets(request: SuiteRequest, scenarios: list) -> list[Target]:
 
 
 def plan_jobs(request: SuiteRequest, targets: list[Target]) -> list[Job]:
-    out = Path(request.out)
+    work = Path(request.work_dir) if request.work_dir is not None else Path(request.out) / "runs"
     jobs = []
     for t in targets:
-        run_dir = out / "runs" / t.scenario / f"seed{t.seed}"
+        run_dir = work / t.scenario / f"seed{t.seed}"
         for method in request.methods:
             jobs.append(Job(scenario=t.scenario, split=t.split, kind=t.kind, seed=t.seed,
                             method=method, bag=t.bag, out_dir=str(run_dir / method),
@@ -154,10 +156,11 @@ def run_suite(request: SuiteRequest, backend, *, progress: bool = True) -> dict:
     jobs = plan_jobs(request, targets)
     out = Path(request.out)
     out.mkdir(parents=True, exist_ok=True)
+    work = Path(request.work_dir) if request.work_dir is not None else out / "runs"
     suite = SuiteFile(out / "suite.json", backend=backend.name, command=request.command,
                       preset=request.preset, rpe_segment_m=request.rpe_segment_m,
                       scenarios={t.scenario: {"split": t.split, **t.info} for t in targets},
-                      resume=request.resume)
+                      resume=request.resume, work_dir=work)
     done = suite.finished_keys()
     jobs = [j for j in jobs if (j.scenario, j.seed, j.method) not in done]
     by_target: "OrderedDict[tuple, list[Job]]" = OrderedDict()
@@ -187,9 +190,9 @@ def run_suite(request: SuiteRequest, backend, *, progress: bool = True) -> dict:
                     continue
             for j in target_jobs:
                 futures[backend.submit(j)] = j
-            _collect(futures, suite, bar, block=False)
+            _collect(futures, suite, bar, block=False, report_to=out)
         bar.status("running")
-        _collect(futures, suite, bar, block=True)
+        _collect(futures, suite, bar, block=True, report_to=out)
     except KeyboardInterrupt:
         interrupted = True
         backend.shutdown(cancel=True)
@@ -205,8 +208,11 @@ def run_suite(request: SuiteRequest, backend, *, progress: bool = True) -> dict:
     return suite.document
 
 
-def _collect(futures: dict, suite, bar, block: bool) -> None:
-    """Move finished futures' rows into the suite file (all of them with ``block``)."""
+def _collect(futures: dict, suite, bar, block: bool, report_to: Path | None = None) -> None:
+    """Move finished futures' rows into the suite file (all of them with ``block``); with
+    ``report_to``, rewrite the report each time a scenario's last job has finished."""
+    from lili_odom.suite.report import write_report
+
     pending = list(futures)
     finished = as_completed(pending) if block else [f for f in pending if f.done()]
     for f in finished:
@@ -219,6 +225,11 @@ def _collect(futures: dict, suite, bar, block: bool) -> None:
             row = error_row(job, f"{type(exc).__name__}: {exc}")
         suite.add(row)
         bar.advance(job, failed="error" in row)
+        if report_to is not None and not any(j.scenario == job.scenario for j in futures.values()):
+            try:
+                write_report(report_to, suite.document)
+            except Exception as exc:  # noqa: BLE001 - the final report is written anyway
+                log.warning("interim report failed: %s", exc)
 
 
 class _Bar:

@@ -55,6 +55,7 @@ __all__ = [
     "scenario_request",
     "scenario_bag",
     "scenario_trajectory",
+    "scenario_table",
 ]
 
 SPLITS = ("tuning", "validation")
@@ -353,3 +354,25 @@ def _measure(scenario: Scenario, seed: int, *, ci: bool = False) -> tuple[float,
     t = np.arange(t0, t1 + 1e-9, 0.05)
     p = sim.trajectory.pose(t)[:, :3, 3]
     return t0, t1, float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+
+
+def scenario_table(scenarios: list[Scenario]) -> str:
+    """Markdown table of ``scenarios``: name, split, kind, sensor, errors, distance, duration, CI
+    piece and what makes each hard (the last sentence of its description starting "Hard:", else
+    the description's first sentence)."""
+    lines = ["| scenario | split | kind | sensor | errors | distance [m] | duration [s] | seeds | CI piece | what makes it hard |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for sc in scenarios:
+        ci = "-" if sc.ci is None else (f"{sc.ci.start:g}-{sc.ci.start + sc.ci.duration:g} s, "
+                                         f"{sc.ci.resolution[0]}x{sc.ci.resolution[1]}")
+        hard = _hard_text(sc.description)
+        lines.append(f"| `{sc.name}` | {sc.split} | {sc.kind} | {sc.sensor.label} | {sc.errors.label()} | "
+                     f"{sc.distance:.0f} | {sc.duration_s:.0f} | {', '.join(str(s) for s in sc.seeds)} | {ci} | {hard} |")
+    return "\n".join(lines) + "\n"
+
+
+def _hard_text(description: str) -> str:
+    m = re.search(r"Hard: (.*?)(?:\.(?:\s|$)|$)", description)
+    if m:
+        return m.group(1).strip()
+    return description.split(". ")[0].strip().rstrip(".")

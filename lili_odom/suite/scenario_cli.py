@@ -3,6 +3,7 @@
 Examples::
 
     lili-odom simulate scenario --list
+    lili-odom simulate scenario --list --markdown          # the table of docs/scenarios.md
     lili-odom simulate scenario building                    # seed = the scenario's first seed
     lili-odom simulate scenario building --ci               # its short CI piece
     lili-odom simulate scenario mine --seed 1 --resolution 32x512 --out bags/mine
@@ -24,6 +25,7 @@ __all__ = ["add_arguments", "run"]
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("name", nargs="?", help="scenario name (config/scenarios/NAME.yaml)")
     parser.add_argument("--list", action="store_true", help="list the scenarios and exit")
+    parser.add_argument("--markdown", action="store_true", help="with --list: the markdown table of docs/scenarios.md")
     parser.add_argument("--seed", type=int, default=None, help="seed (default: the scenario's first seed)")
     parser.add_argument("--ci", action="store_true", help="simulate the scenario's short CI piece")
     parser.add_argument("--resolution", default=None, help="ROWSxCOLS override of the sensor profile")
@@ -36,8 +38,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from lili_odom.sim.generator import simulate_bag
-    from lili_odom.suite.scenario import load_scenarios, scenario_bag, scenario_request
+    from lili_odom.suite.scenario import load_scenarios, scenario_bag, scenario_request, scenario_table
 
+    if args.list and args.markdown:
+        print(scenario_table(load_scenarios()), end="")
+        return 0
     if args.list:
         for sc in load_scenarios():
             print(f"{sc.name:22s} {sc.split:10s} {sc.kind:10s} {sc.sensor.label:16s} "
