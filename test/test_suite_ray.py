@@ -322,3 +322,49 @@ def test_ray_cancel_stops_outstanding_tasks(ray_instance, tmp_path):
         future.result(timeout=1)
     time.sleep(1)
     assert not (tmp_path / "finished").exists()
+
+
+def test_ray_ctrl_c_keeps_finished_rows(ray_instance, tmp_path):
+    """Ctrl-C during a suite on Ray: the finished row is written, the running task is
+    cancelled, the reports are written and the interrupt reaches the caller."""
+    import signal
+
+    from lili_odom.suite.ray_backend import RayBackend
+    from lili_odom.suite.runner import SuiteRequest, run_suite
+
+    bag = tmp_path / "userbag"
+    bag.mkdir()
+
+    def run(job: Job) -> dict:
+        if job.method == "slow":
+            (tmp_path / "slow_started").write_text("1")
+            time.sleep(120)
+            (tmp_path / "slow_finished").write_text("1")
+        row = empty_row(job)
+        row.update(ate_m=0.25, scans=1)
+        return row
+
+    out = tmp_path / "suite"
+
+    def interrupt_when_ready() -> None:
+        deadline = time.time() + 120
+        while time.time() < deadline:
+            try:
+                quick_done = len(json.loads((out / "suite.json").read_text())["rows"]) == 1
+            except (OSError, ValueError, KeyError):
+                quick_done = False
+            if quick_done and (tmp_path / "slow_started").exists():
+                break
+            time.sleep(0.2)
+        os.kill(os.getpid(), signal.SIGINT)  # what Ctrl-C sends
+
+    threading.Thread(target=interrupt_when_ready, daemon=True).start()
+    request = SuiteRequest(out=out, bags=[bag], methods=["quick", "slow"])
+    with pytest.raises(KeyboardInterrupt):
+        run_suite(request, RayBackend(jobs=2, run=run), progress=False)
+    doc = json.loads((out / "suite.json").read_text())
+    assert doc["backend"] == "ray" and doc["wall_time_s"] is not None
+    assert [(r["method"], r["ate_m"]) for r in doc["rows"]] == [("quick", 0.25)]
+    assert (out / "suite.md").exists()
+    time.sleep(1)
+    assert not (tmp_path / "slow_finished").exists()

@@ -418,6 +418,11 @@ class RayBackend:
 
     def __init__(self, address: str | None = None, jobs: int | None = None, num_cpus: float = 1,
                  run: Callable[[Job], dict] = execute, check_sources: bool = True) -> None:
+        if address is None:  # read by Ray when it is imported
+            for k, v in LOCAL_RAY_ENV.items():
+                os.environ.setdefault(k, v)
+        else:
+            os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
         try:
             import ray  # noqa: F401
         except ImportError as exc:
@@ -447,8 +452,6 @@ class RayBackend:
         if ray.is_initialized():
             return
         if address is None:
-            for k, v in LOCAL_RAY_ENV.items():
-                os.environ.setdefault(k, v)
             _loopback_only()
             ray.init(num_cpus=max(1, int(jobs or 1)), include_dashboard=False,
                      log_to_driver=False, logging_level=logging.WARNING, configure_logging=False)
@@ -457,7 +460,6 @@ class RayBackend:
             if ip not in ("127.0.0.1", "::1", "localhost"):
                 log.warning("the local Ray instance listens on %s, not only on the loopback interface", ip)
         else:
-            os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
             ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING,
                      configure_logging=False)
 
