@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lili_odom.errors import check_range
+from lili_odom.extrinsics import OS1_SENSOR_TO_IMU, OS1_SENSOR_TO_LIDAR, pose_from_xyz_rpy
 from lili_odom.fusion.imu import ImuNoiseConfig
 from lili_odom.fusion.wheel import WheelNoiseConfig
 from lili_odom.fusion.wheel_scale import WheelScaleConfig
@@ -135,18 +136,14 @@ class LidarNoiseConfig:
 
 
 def _default_T_base_lidar() -> np.ndarray:
-    # Ouster OS1 on a Husky: os_lidar is yawed 180 deg about z from os_sensor, 36.18 mm up.
-    # The base_link -> os_sensor mount is robot specific; config/*.yaml overrides this.
-    T = np.eye(4)
-    T[:3, :3] = np.diag([-1.0, -1.0, 1.0])
-    T[2, 3] = 0.03618
-    return T
+    """The OS1's ``os_sensor -> os_lidar`` with ``base_link`` at ``os_sensor`` (the robot's mount
+    is set by :class:`lili_odom.config.ExtrinsicsConfig`)."""
+    return pose_from_xyz_rpy(OS1_SENSOR_TO_LIDAR)
 
 
 def _default_T_base_imu() -> np.ndarray:
-    T = np.eye(4)
-    T[:3, 3] = [0.006253, -0.011775, 0.007645]
-    return T
+    """The OS1's ``os_sensor -> os_imu`` with ``base_link`` at ``os_sensor``."""
+    return pose_from_xyz_rpy(OS1_SENSOR_TO_IMU)
 
 
 @dataclass
