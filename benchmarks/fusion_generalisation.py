@@ -1,11 +1,12 @@
 """Odometry that keeps the LiDAR's point-to-plane information: before/after on given bags.
 
-    python benchmarks/fusion_generalisation.py --bag building=BAG --bag trial1=BAG \\
-        [--configs default config/point_to_point_only.yaml] [--peers genz wheels] [--reuse]
+    python -m benchmarks.fusion_generalisation --bag building=BAG --bag trial1=BAG \\
+        [--configs default benchmarks/configs/point_to_point_only.yaml] \\
+        [--peers genz wheels] [--reuse]
 
 Each bag is run by ``lili`` with every configuration (``default`` = the built-in defaults;
-``config/point_to_point_only.yaml`` switches off the perturbation cap, the point-to-plane
-refinements, the LiDAR's information inside the detected subspace and the wheel scale from
+``benchmarks/configs/point_to_point_only.yaml`` switches off the perturbation cap, the
+point-to-plane refinements, the LiDAR's information inside the detected subspace and the wheel scale from
 partially constrained registrations), and, when the suite's peer runners are importable
 (``lili_odom.suite.peers``), by the named peers. Runs go to ``RUNS/<bag>_<config>`` (default
 ``data/fusion_generalisation``) and are reused with ``--reuse``. Reported per run: ATE (evo, SE(3)-aligned translation RMSE) and its
@@ -107,7 +108,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="a bag to run (repeatable); NAME labels it")
     ap.add_argument("--kind", action="append", default=[], metavar="NAME=KIND",
                     help="kind of scene of a bag for the peers' presets (default: NAME)")
-    ap.add_argument("--configs", nargs="+", default=["default", "config/point_to_point_only.yaml"])
+    ap.add_argument("--configs", nargs="+",
+                    default=["default", "benchmarks/configs/point_to_point_only.yaml"])
     ap.add_argument("--peers", nargs="*", default=[])
     ap.add_argument("--start-m", type=float, default=20.0,
                     help="travel [m] counted as the start of each run")
