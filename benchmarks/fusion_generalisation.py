@@ -1,11 +1,12 @@
 """Odometry that keeps the LiDAR's point-to-plane information: before/after on given bags.
 
-    python benchmarks/fusion_generalisation.py --bag building=BAG --bag trial1=BAG \\
-        [--configs default config/point_to_point_only.yaml] [--peers genz wheels] [--reuse]
+    python -m benchmarks.fusion_generalisation --bag building=BAG --bag trial1=BAG \\
+        [--configs default benchmarks/configs/point_to_point_only.yaml] \\
+        [--peers genz wheels] [--reuse]
 
 Each bag is run by ``lili`` with every configuration (``default`` = the built-in defaults;
-``config/point_to_point_only.yaml`` switches off the perturbation cap, the point-to-plane
-refinements, the LiDAR's information inside the detected subspace and the wheel scale from
+``benchmarks/configs/point_to_point_only.yaml`` switches off the perturbation cap, the
+point-to-plane refinements, the LiDAR's information inside the detected subspace and the wheel scale from
 partially constrained registrations), and, when the suite's peer runners are importable
 (``lili_odom.suite.peers``), by the named peers. Runs go to ``RUNS/<bag>_<config>`` (default
 ``data/fusion_generalisation``) and are reused with ``--reuse``. Reported per run: ATE (evo, SE(3)-aligned translation RMSE) and its
@@ -20,19 +21,15 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+from benchmarks._common import RESULTS, ROOT
+from lili_odom.config import load_config
+from lili_odom.evaluation.runner import run_bag
 
-from lili_odom.config import load_config  # noqa: E402
-from lili_odom.evaluation.runner import run_bag  # noqa: E402
-
-DEFAULT_OUT = ROOT / "benchmarks" / "results" / "fusion_generalisation"
+DEFAULT_OUT = RESULTS / "fusion_generalisation"
 
 
 def _label(config: str) -> str:
@@ -107,7 +104,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="a bag to run (repeatable); NAME labels it")
     ap.add_argument("--kind", action="append", default=[], metavar="NAME=KIND",
                     help="kind of scene of a bag for the peers' presets (default: NAME)")
-    ap.add_argument("--configs", nargs="+", default=["default", "config/point_to_point_only.yaml"])
+    ap.add_argument("--configs", nargs="+",
+                    default=["default", "benchmarks/configs/point_to_point_only.yaml"])
     ap.add_argument("--peers", nargs="*", default=[])
     ap.add_argument("--start-m", type=float, default=20.0,
                     help="travel [m] counted as the start of each run")
@@ -146,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def report(results: dict) -> str:
     lines = ["# Fusion generalisation: before/after", "",
-             "`python benchmarks/fusion_generalisation.py` (see its docstring); ATE = evo "
+             "`python -m benchmarks.fusion_generalisation` (see its docstring); ATE = evo "
              "SE(3)-aligned translation RMSE; degenerate % = scans with a detected subspace "
              "(whole run / first metres of travel); wheel scale = online estimate after "
              "10 m / 20 m / at the end (the simulator's in the heading).", ""]

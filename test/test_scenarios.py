@@ -9,7 +9,8 @@ import pytest
 
 from lili_odom.sim.generator import Simulation, cache_key, sensors_for
 from lili_odom.sim.wheels import simulate_wheel_odom
-from lili_odom.sim.world import build_mesh, load_world
+from lili_odom.sim.mesh import build_mesh
+from lili_odom.sim.world import load_world
 from lili_odom.suite.scenario import (
     SPLITS,
     ErrorProfile,

@@ -4,7 +4,9 @@ import pytest
 
 from lili_odom.sim.generator import SimRequest, Simulation
 from lili_odom.sim.lidar import RayCaster
-from lili_odom.sim.world import Centreline, Segment, build_mesh, load_world
+from lili_odom.sim.layout import Centreline
+from lili_odom.sim.mesh import build_mesh
+from lili_odom.sim.world import Segment, load_world
 
 
 @pytest.mark.parametrize("name", ["tunnel", "corridor", "open_field"])

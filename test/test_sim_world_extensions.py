@@ -7,20 +7,19 @@ import pytest
 
 from lili_odom.sim.generator import SimRequest, sensors_for
 from lili_odom.sim.trajectory import Trajectory
+from lili_odom.sim.layout import Centreline, FloorField
+from lili_odom.sim.mesh import build_mesh
 from lili_odom.sim.world import (
-    Centreline,
     CrossSection,
     FeatureSpec,
     Features,
     Floor,
-    FloorField,
     ObjectSpec,
     Outside,
     Ramp,
     Segment,
     TrialPlan,
     WorldDescription,
-    build_mesh,
 )
 
 

@@ -7,9 +7,9 @@ import importlib
 help = "write synthetic data: degenerate shape pairs, Husky-in-a-tunnel or scenario rosbag2 mcap bags"
 
 _KINDS = {
-    "shapes": ("lili_odom.sim.shapes_cli", "shape pairs (reference + local scan) with true subspaces"),
-    "tunnel": ("lili_odom.sim.tunnel_cli", "a simulated OS1-128 / IMU / wheel odometry tunnel bag"),
-    "scenario": ("lili_odom.suite.scenario_cli", "the bag of one scenario of the suite (config/scenarios)"),
+    "shapes": ("lili_odom.commands.simulate_shapes", "shape pairs (reference + local scan) with true subspaces"),
+    "tunnel": ("lili_odom.commands.simulate_tunnel", "a simulated OS1-128 / IMU / wheel odometry tunnel bag"),
+    "scenario": ("lili_odom.commands.simulate_scenario", "the bag of one scenario of the suite (config/scenarios)"),
 }
 
 

@@ -124,18 +124,10 @@ LIO_SAM_EIGEN_THRESHOLD = 100.0
 """LIO-SAM's ``eignThre``: absolute bound on the eigenvalues of the raw ``A^T A``."""
 
 HESSIAN_THRESHOLD = 0.003
-"""Frozen threshold on per-correspondence eigenvalues of the scaled body-frame Hessian.
-
-Tuned once by ``benchmarks/tune_hessian.py`` on the clean (noise-free) cases of
-``lili_odom.sim.shapes`` (six scenarios x seeds 0, 1, 2; default ``HessianConfig``, reference
-from ``factory.reference_for_detection``, detection from the case's initial pose). For a case of
-true dimension k the k smallest eigenvalues must fall below the threshold and the others above.
-Over all 18 clean cases the largest "degenerate" eigenvalue was 1.4e-4 (closed cylinder) and
-the smallest "constrained" one 6.0e-2 (open cylinder); the threshold is their geometric mean,
-2.9e-3, rounded to one digit. Noisy cases took no part. For information: with the shapes'
-N(0, 0.02^2) noise the degenerate eigenvalues rise to 1.1e-2 .. 1.7e-2 (noisy PCA normals add
-spurious constraints), above this threshold, while the constrained ones stay >= 6.8e-2.
-"""
+"""Frozen threshold on per-correspondence eigenvalues of the scaled body-frame Hessian
+(dimensionless). An eigenvalue below it is a degenerate direction. Set once on the clean
+synthetic shapes, between their largest degenerate and smallest constrained eigenvalue
+(``docs/evaluation.md``)."""
 
 MIN_CORRESPONDENCES = 10
 

@@ -26,9 +26,9 @@ re-associate at every ICP iteration):
    identity needs.)
 6. The basis is l1-sparsified (``sparsify``).
 
-Defaults were chosen by measurement on the synthetic shapes (``benchmarks/shapes.py``):
-``k = 5`` (point-to-point ICP pulls a scan back from ~1.5 map spacings, so ``k = 3`` under-
-detects), ``tau_displacement = 0.2``, ``tau_pca = 0.25``, 100 ICP iterations at 1e-3.
+Defaults: ``k = 5`` (point-to-point ICP pulls a scan back from ~1.5 map spacings, so
+``k = 3`` under-detects), ``tau_displacement = 0.2``, ``tau_pca = 0.25``, 100 ICP iterations
+at 1e-3. How they were chosen: ``docs/evaluation.md``.
 
 Cost: almost all of it is the 12 perturbed KISS-ICP runs (each runs to convergence, typically
 10-40 iterations; the native call holds the GIL, so Python threads do not overlap them). Most
@@ -36,21 +36,14 @@ runs come back: their registration returns to ``P_opt`` and step 4 rejects their
 ``return_ratio > 0`` such a run is stopped once its displacement ratio has fallen
 below ``return_ratio``, checked every ``return_check_iterations`` ICP iterations (KISS-ICP's
 iterations are stateless, so continuing from the pose reached is the same ICP up to rounding);
-runs that do not come back (degenerate directions) run to convergence as before.
-``benchmarks/detection_cost.py`` finds the detected subspace as close to the paper's as the
-detector is to itself from scan to scan along the tunnel, and ``benchmarks/speed.py`` the
-time (README, Speed). The detector's own default stays 0 (the paper; ``lili-odom detect``
-and the shape benchmark); the odometry's defaults use 0.1
-(:class:`lili_odom.pipeline.odometry.PipelineConfig`), with which LiLi meets the tunnel
-targets over simulator seeds (``benchmarks/results/seeds_realtime/seeds.md``). A caveat: a
-run can dip below the ratio and slide out again, so a direction can be missed: along the
-featureless tunnel 1-2 detections in 30-80 at 64 x 512 and 128 x 1024 with 0.1
-(``benchmarks/return_ratio.py`` counts them from each run's ``details["check_ratios"]``),
-more on sparse 32 x 256 scans (the short featureless scenario of
-``test/test_degenerate_odometry.py`` checks the odometry with it).
-The opt-in ``perturbation_points`` / ``perturbation_iterations`` / ``both_signs=False`` make
-the runs cheaper but change the detected subspace on odometry inputs
-(``benchmarks/lili_speed.py``), so those defaults stay the paper's.
+runs that do not come back (degenerate directions) run to convergence. The detector's own
+default is 0 (every run to convergence, as in the paper; ``lili-odom detect``); the odometry
+uses 0.1 (:class:`lili_odom.pipeline.odometry.PipelineConfig`). A run can dip below the
+ratio and slide out again, so an early stop can miss a direction; each run's ratios at the
+checks are returned in ``details["check_ratios"]``. The opt-in ``perturbation_points`` /
+``perturbation_iterations`` / ``both_signs=False`` make the runs cheaper but change the
+detected subspace on odometry inputs, so their defaults are the paper's. Cost and accuracy
+of these settings: ``docs/performance.md``.
 """
 from __future__ import annotations
 
@@ -335,7 +328,7 @@ class LiliDetector:
                 "perturbation_points": len(moved),
                 "returned_early": returned,
                 # per perturbed run, its displacement ratio at each return check (empty
-                # without return_ratio): benchmarks/return_ratio.py
+                # without return_ratio)
                 "check_ratios": check_ratios,
             },
         )

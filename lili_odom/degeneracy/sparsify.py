@@ -9,12 +9,11 @@ problem is solved by BFGS from several deterministic starts, keeping the best.
 
 ``T`` only mixes the rows, so the subspace is never changed; only the choice of basis inside it.
 
-Speed: for k = 2 and 3 (the usual degenerate dimensions) ``expm`` of the skew matrix and its
+Gradient: for k = 2 and 3 (the usual degenerate dimensions) ``expm`` of the skew matrix and its
 derivative are evaluated in closed form (Rodrigues: ``S^2 = -phi^2 I`` on the plane of ``S``), so
-BFGS gets an exact gradient and no finite differences; this costs ~1 ms instead of seconds
-(``scipy.linalg.expm`` of a 3 x 3 matrix goes through LAPACK, which on a loaded machine with a
-multi-threaded BLAS can take milliseconds per call). k >= 4 uses an eigen-decomposition of the
-skew matrix and finite differences.
+BFGS gets an exact gradient without finite differences and without ``scipy.linalg.expm`` (a
+LAPACK call per evaluation). k >= 4 uses an eigen-decomposition of the skew matrix and finite
+differences.
 """
 from __future__ import annotations
 

@@ -1,4 +1,7 @@
-"""Configuration of the fusion estimator (dataclasses; SI units, 1-sigma values)."""
+"""Configuration of the fusion estimator (dataclasses; SI units, 1-sigma values).
+
+Why the defaults are what they are, and how they were measured: ``docs/design/fusion.md``.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -6,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lili_odom.errors import check_range
+from lili_odom.extrinsics import OS1_SENSOR_TO_IMU, OS1_SENSOR_TO_LIDAR, pose_from_xyz_rpy
 from lili_odom.fusion.imu import ImuNoiseConfig
 from lili_odom.fusion.wheel import WheelNoiseConfig
 from lili_odom.fusion.wheel_scale import WheelScaleConfig
@@ -43,22 +47,14 @@ class LidarNoiseConfig:
             registration (10 sigma) to ~8 %.
         factor: how the scan-to-map registration enters the graph. ``"between"``:
             a ``BetweenFactorPose3`` from the previous fused pose with
-            ``Z = T_fused(i-1)^-1 T_icp``. When iSAM2 later moves ``X(i-1)`` the correction
-            is counted twice, and the estimate oscillates scan to scan across the tunnel
-            (``benchmarks/arc_diagnostics.py jumps``). ``"prior"`` (experimental): an absolute
-            ``PriorFactorPose3`` on the new pose (the registration measures the pose against
-            the map, which lives in the odometry frame); no oscillation, but see
-            ``anchor_sigma`` and ``benchmarks/results/prior_factor/tunnel.md``. ``"hybrid"``
-            (default): the prior for translation and yaw, the between factor for roll and
-            pitch (each with the information restricted to those directions). It needs
-            solution remapping (``pipeline.remap_iterations``) and, when the odometry starts
-            while moving, the detection hold of the map's first metres
-            (``pipeline.detection_schedule``); results over seeds in
-            ``benchmarks/results/seeds.md``. Why the
-            relative tilt matters on Trial 1 is not established (suspected: the prior pins
-            the tilt to the local map's, and the IMU's gravity projection turns a tilt error
-            into velocity along the axis).
-            ``config/between_factor.yaml`` restores the earlier between-factor setup.
+            ``Z = T_fused(i-1)^-1 T_icp`` (when iSAM2 later moves ``X(i-1)`` the correction
+            is counted twice). ``"prior"`` (experimental): an absolute ``PriorFactorPose3``
+            on the new pose (the registration measures the pose against the map, which lives
+            in the odometry frame); see ``anchor_sigma``. ``"hybrid"`` (default): the prior
+            for translation and yaw, the between factor for roll and pitch (each with the
+            information restricted to those directions). It relies on solution remapping
+            (``pipeline.remap_iterations``) and, when the odometry starts while moving, on
+            the detection hold of the map's first metres (``pipeline.detection_schedule``).
         basis_snap: components of a degenerate basis row below this fraction of its largest
             one are zeroed before the LiDAR information is restricted
             (:func:`lili_odom.fusion.subspace.snap_basis`); 0 = use the basis as detected.
@@ -67,15 +63,13 @@ class LidarNoiseConfig:
             with this sigma (scaled twist units, m;
             :func:`lili_odom.fusion.subspace.degenerate_anchor`).
             Without it the LiDAR information kept next to a detected direction moves the
-            position along it: the basis carries small spurious off-axis components, so the
-            well-measured directions the factor keeps are tilted towards the axis, and on
-            the simulated tunnel the fused forward increment strays from the wheels'
-            (``benchmarks/results/along_axis_jitter.md``). The wheel
-            prediction's components along the subspace are its own weighted fit
+            position along it (a detected basis carries small spurious off-axis components,
+            so the well-measured directions the factor keeps are tilted towards the axis).
+            The wheel prediction's components along the subspace are its own weighted fit
             (``reference_information``): wheels measure no roll or pitch, and a detected
             axis carrying some would otherwise trade them against the distance. The reported
             covariance adds the wheel random walk along the subspace, which the anchor would
-            otherwise hide. 0.05 (default); 0 = no anchor (``config/no_anchor.yaml``).
+            otherwise hide. Default 0.05; 0 = no anchor.
         subspace_information: keep the LiDAR's own information inside the detected degenerate
             subspace (a prior at the registration refined there by point-to-plane
             Gauss-Newton, weighted by its Hessian; :mod:`lili_odom.pipeline.plane_refinement`)
@@ -135,18 +129,14 @@ class LidarNoiseConfig:
 
 
 def _default_T_base_lidar() -> np.ndarray:
-    # Ouster OS1 on a Husky: os_lidar is yawed 180 deg about z from os_sensor, 36.18 mm up.
-    # The base_link -> os_sensor mount is robot specific; config/*.yaml overrides this.
-    T = np.eye(4)
-    T[:3, :3] = np.diag([-1.0, -1.0, 1.0])
-    T[2, 3] = 0.03618
-    return T
+    """The OS1's ``os_sensor -> os_lidar`` with ``base_link`` at ``os_sensor`` (the robot's mount
+    is set by :class:`lili_odom.config.ExtrinsicsConfig`)."""
+    return pose_from_xyz_rpy(OS1_SENSOR_TO_LIDAR)
 
 
 def _default_T_base_imu() -> np.ndarray:
-    T = np.eye(4)
-    T[:3, 3] = [0.006253, -0.011775, 0.007645]
-    return T
+    """The OS1's ``os_sensor -> os_imu`` with ``base_link`` at ``os_sensor``."""
+    return pose_from_xyz_rpy(OS1_SENSOR_TO_IMU)
 
 
 @dataclass
@@ -174,18 +164,16 @@ class FusionConfig:
             (0 = always the frame's -z). At rest the accelerometer cannot tell its bias from a
             tilt, so the start's gravity alignment takes a bias ``b`` as a tilt of about
             ``b / g`` and the local map is built in that frame; once a turn makes the bias
-            observable, the IMU pulls the estimate towards true gravity, away from the map
-            (``benchmarks/arc_diagnostics.py tilt``). With a gain, each LiDAR update moves
-            the gravity used by the IMU preintegration by this fraction of the averaged tilt
-            between the registration and the fused pose beyond the deadband, so the IMU's
-            gravity follows the map's frame (an integral controller; per update, 0..1;
-            0.01 by default, ``config/no_gravity_tracking.yaml`` turns it off).
+            observable, the IMU pulls the estimate towards true gravity, away from the map.
+            With a gain, each LiDAR update moves the gravity used by the IMU preintegration
+            by this fraction of the averaged tilt between the registration and the fused pose
+            beyond the deadband, so the IMU's gravity follows the map's frame (an integral
+            controller; per update, 0..1; default 0.01, 0 = off).
         gravity_tracking_window_s: time constant of that average [s].
         gravity_tracking_deadband: averaged tilt differences up to this [rad] are not
             integrated (a map built from the estimate lags it by a little whenever the tilt
-            moves, and integrating that lag can walk gravity and map away together). 0 by
-            default: over the tunnel seeds 0.15 deg (``config/gravity_tracking.yaml``)
-            cost more than it saved (``benchmarks/results/seeds_gravity/seeds.md``).
+            moves, and integrating that lag can walk gravity and map away together).
+            Default 0.
         gravity_tracking_max: bound of that rotation of gravity [rad].
         gravity_tracking_gate: registrations whose tilt differs from the fused pose's by more
             than this [rad] are not used for it (outliers).
@@ -198,8 +186,7 @@ class FusionConfig:
             motion along the subspace (:func:`lili_odom.fusion.subspace.weighted_restriction`),
             so a detected direction that mixes tilt into the translation is neither weakened
             by the wheels' unknown tilt nor moved by it; ``"same"`` as the LiDAR's
-            (``lidar.restriction``; ``config/marginalized_wheels.yaml``), ``"marginalize"``
-            or ``"project"``.
+            (``lidar.restriction``), ``"marginalize"`` or ``"project"``.
         no_imu_sigma_translation_per_s: fallback motion-model sigma [m per s of interval].
         no_imu_sigma_rotation_per_s: fallback motion-model sigma [rad per s of interval].
         no_imu_sigma_floor_translation: [m] floor of the fallback translation sigma.

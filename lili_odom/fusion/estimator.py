@@ -46,7 +46,14 @@ Factors between consecutive states ``i-1 -> i``:
 
 Error convention: GTSAM's ``BetweenFactorPose3`` error is ``Logmap(Z^-1 X(i-1)^-1 X(i))``, a
 twist in the body frame of ``X(i)``; all informations here are 6x6 in our ``(v, w)`` order in
-base_link and converted with the order permutation at the GTSAM boundary.
+base_link and converted with the order permutation at the GTSAM boundary
+(:mod:`lili_odom.fusion.factors`).
+
+One :meth:`FusionEstimator.update`: the measurements are checked
+(:mod:`lili_odom.fusion.measurements`), the information is split between LiDAR and wheels and
+the factors planned (``_plan_factors``), the factors built (:mod:`lili_odom.fusion.factors`)
+and iSAM2 solved with the no-IMU retry (``_solve``, ``_motion_factors``), then the
+post-update calibration runs (``_after_update``).
 
 Fallbacks:
 
@@ -85,88 +92,43 @@ import numpy as np
 from gtsam.symbol_shorthand import B, V, X
 
 from lili_odom.fusion.config import FusionConfig
+from lili_odom.fusion.factors import (
+    add_lidar_factors,
+    add_motion_model_factors,
+    add_subspace_factor,
+    add_wheel_factor,
+    from_gtsam_matrix,
+    robust_kernel,
+)
 from lili_odom.fusion.imu import (
     ImuBuffer,
     gravity_alignment,
     integrate,
     make_preintegration_params,
 )
+from lili_odom.fusion.measurements import (
+    LidarMeasurement,
+    WheelIncrement,
+    as_pose,
+    finite,
+    lidar_measurement,
+    plausible,
+    wheel_increment,
+)
 from lili_odom.fusion.subspace import (
+    SubspaceSplit,
     covariance_along,
-    scaled_lidar_to_base,
     degenerate_anchor,
     inflate_along,
-    restrict_information,
-    snap_basis,
+    scaled_lidar_to_base,
     split_information,
     sqrt_information,
 )
-from lili_odom.fusion.wheel import WheelBuffer, wheel_information
+from lili_odom.fusion.wheel import WheelBuffer
 from lili_odom.fusion.wheel_scale import WheelScaleEstimator
 from lili_odom.geometry import exp, log, matrix, orthonormalize
 
 __all__ = ["FusionEstimator", "FusionOutput", "FusionStats", "SubspaceMeasurement"]
-
-# base_link roll and pitch (rows of the (v, w) identity) and the other four directions
-_TILT = np.eye(6)[[3, 4]]
-_NOT_TILT = np.eye(6)[[0, 1, 2, 5]]
-
-# (v, w) <-> (w, v) permutation for 6x6 matrices.
-_SWAP = np.block([[np.zeros((3, 3)), np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
-
-
-def _to_gtsam_matrix(m: np.ndarray) -> np.ndarray:
-    return _SWAP @ m @ _SWAP
-
-
-_from_gtsam_matrix = _to_gtsam_matrix
-
-
-def _noise_from_information(omega_vw: np.ndarray) -> gtsam.noiseModel.Base:
-    """GTSAM Gaussian noise model from a PSD information in (v, w) order.
-
-    ``Gaussian.Information`` runs an LLT that silently yields NaNs on a singular matrix, so the
-    square root is built from an eigendecomposition and made upper triangular by QR.
-    """
-    R = sqrt_information(_to_gtsam_matrix(omega_vw))
-    R = np.linalg.qr(R, mode="r")
-    return gtsam.noiseModel.Gaussian.SqrtInformation(np.asarray(R), False)
-
-
-def _robust_kernel(name: str, threshold: float) -> Any:
-    """GTSAM M-estimator ``name`` (``none`` | ``huber`` | ``cauchy``) at a whitened threshold."""
-    if name == "huber":
-        return gtsam.noiseModel.mEstimator.Huber.Create(threshold)
-    if name == "cauchy":
-        return gtsam.noiseModel.mEstimator.Cauchy.Create(threshold)
-    return None
-
-
-def _finite(*arrays: Any) -> bool:
-    try:
-        return all(np.all(np.isfinite(np.asarray(a, dtype=float))) for a in arrays)
-    except (TypeError, ValueError):
-        return False
-
-
-def _as_pose(T: Any) -> np.ndarray | None:
-    """A valid 4x4 rigid transform or None (non-finite, wrong shape, far from SO(3))."""
-    try:
-        T = np.asarray(T, dtype=np.float64)
-    except (TypeError, ValueError):
-        return None
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        return None
-    if np.abs(T[:3, 3]).max() > 1e7:  # beyond any odometry frame; would overflow later
-        return None
-    R = T[:3, :3]
-    with np.errstate(over="ignore", invalid="ignore"):
-        if not np.allclose(R.T @ R, np.eye(3), atol=1e-3) or np.linalg.det(R) < 0.5:
-            return None
-    if not np.allclose(T[3], [0, 0, 0, 1], atol=1e-6):
-        return None
-    return orthonormalize(T)
-
 
 @dataclass
 class FusionOutput:
@@ -237,6 +199,25 @@ class FusionStats:
     n_resets: int = 0
     n_reset_fallbacks: int = 0
     last_failure: str = ""
+
+
+@dataclass
+class _FactorPlan:
+    """How one update's information is shared out (:meth:`FusionEstimator._plan_factors`).
+
+    ``split``: LiDAR and wheel informations restricted along the degenerate subspace;
+    ``lidar_target`` / ``lidar_information``: pose (4x4) and ``(v, w)`` information of the
+    LiDAR factor (the registration, or with the degenerate anchor its anchored version);
+    ``sub_pose`` / ``sub_info``: the LiDAR subspace factor or None; ``walk_step``: wheel
+    random-walk variance [m^2] the anchor hides in this update, or None without anchor.
+    """
+
+    split: SubspaceSplit
+    lidar_target: np.ndarray | None
+    lidar_information: np.ndarray | None
+    sub_pose: np.ndarray | None
+    sub_info: np.ndarray | None
+    walk_step: float | None = None
 
 
 @dataclass
@@ -355,7 +336,7 @@ class FusionEstimator:
                 T0[:3, :3] = align.R_world_base
                 notes.append("gravity aligned" + (" (at rest)" if stationary else " (moving)"))
         else:
-            T0 = _as_pose(pose)
+            T0 = as_pose(pose)
             if T0 is None:
                 raise ValueError("initial pose must be a finite rigid 4x4 transform")
         if wheel_v is not None:  # started while moving: the wheels know the speed
@@ -367,7 +348,7 @@ class FusionEstimator:
             sigma_v = cfg.prior_sigma_velocity if stationary else cfg.prior_sigma_velocity_moving
         else:
             v0 = np.asarray(velocity, dtype=float).reshape(3)
-            if not _finite(v0):
+            if not finite(v0):
                 raise ValueError("initial velocity must be finite")
             sigma_v = cfg.prior_sigma_velocity
         bias0 = gtsam.imuBias.ConstantBias(np.zeros(3), gyro_bias)
@@ -407,7 +388,7 @@ class FusionEstimator:
             delta = self.wheels.delta(t - window, t)
             if delta is not None:
                 v = delta[:3, 3] / window
-                return v if _finite(v) and np.linalg.norm(v) < self.config.max_speed else None
+                return v if finite(v) and np.linalg.norm(v) < self.config.max_speed else None
         return None
 
     # ---------------------------------------------------------------------------------------
@@ -425,6 +406,13 @@ class FusionEstimator:
         subspace: SubspaceMeasurement | None = None,
     ) -> FusionOutput | None:
         """Add the state at scan stamp ``t`` and return the fused estimate.
+
+        The steps: check the LiDAR measurement and the wheel increment
+        (:mod:`lili_odom.fusion.measurements`), split the information between them along the
+        degenerate subspace (:meth:`_plan_factors`), build the factors and solve, retrying
+        without the IMU factor when it makes the graph unsolvable (:meth:`_solve`), then
+        calibrate from the result: gravity direction, wheel scale, motion model
+        (:meth:`_after_update`).
 
         Args:
             t: scan stamp [s]; must be later than the previous one.
@@ -465,202 +453,101 @@ class FusionEstimator:
             return None
         dt = t - prev.t
         notes: list[str] = []
-        i = prev.index + 1
         T_prev = matrix(prev.pose)
-
-        # -- LiDAR measurement and degenerate subspace -------------------------------------
-        T_meas = _as_pose(T_icp) if T_icp is not None else None
-        if T_icp is not None and T_meas is None:
-            self.stats.n_rejected_lidar += 1
-            notes.append("LiDAR pose rejected (non-finite or not rigid)")
-        basis = np.zeros((0, 6))
-        length = cfg.lidar.default_length
-        if T_meas is not None and degeneracy is not None and getattr(degeneracy, "ok", True):
-            try:
-                basis = np.asarray(degeneracy.basis_scaled, dtype=float).reshape(-1, 6)
-                length = float(degeneracy.characteristic_length)
-            except (AttributeError, TypeError, ValueError):
-                basis, length = np.full((1, 6), np.nan), math.nan
-            if not (_finite(basis) and math.isfinite(length) and 1e-3 <= length <= 1e6):
-                self.stats.n_rejected_basis += 1
-                notes.append("degeneracy basis rejected (non-finite or absurd length); "
-                             "LiDAR factor dropped")
-                T_meas = None
-                basis = np.zeros((0, 6))
-                length = cfg.lidar.default_length
-            else:
-                basis = snap_basis(basis, cfg.lidar.basis_snap)
-        omega_lidar = cfg.lidar.information()
-        if lidar_information is not None:
-            cand = np.asarray(lidar_information, dtype=float)
-            if (cand.shape == (6, 6) and _finite(cand)
-                    and np.linalg.eigvalsh(0.5 * (cand + cand.T)).min()
-                    >= -1e-9 * max(np.abs(cand).max(), 1.0)):
-                omega_lidar = 0.5 * (cand + cand.T)
-            else:
-                self.stats.n_rejected_lidar_information += 1
-                notes.append("LiDAR information rejected; using the configured one")
-
-        if T_meas is not None and not self._plausible(np.linalg.inv(T_prev) @ T_meas, dt):
-            self.stats.n_rejected_lidar += 1
-            notes.append("LiDAR pose rejected (implausible jump from the previous fused pose)")
-            T_meas = None
-            basis = np.zeros((0, 6))
-
-        # -- wheel increment ------------------------------------------------------------------
-        delta_w = None
-        if wheel_delta is not None:
-            delta_w = _as_pose(wheel_delta)
-            if delta_w is None:
-                self.stats.n_rejected_wheel += 1
-                notes.append("wheel increment rejected")
-        else:
-            delta_w = self.wheels.delta(prev.t, t)
-            if delta_w is not None:
-                delta_w = _as_pose(delta_w)
-        if delta_w is not None and not self._plausible(delta_w, dt):
-            self.stats.n_rejected_wheel += 1
-            notes.append("wheel increment rejected (implausible)")
-            delta_w = None
-        raw_wheel = delta_w
-        if delta_w is not None:  # calibrated distance (fusion.wheel_scale)
-            delta_w = self.wheel_scale.correct(delta_w)
-        if delta_w is None:
+        lidar = lidar_measurement(T_icp, degeneracy, lidar_information, T_prev, dt, cfg,
+                                  self.stats, notes)
+        wheel = wheel_increment(prev.t, t, wheel_delta, wheel_info, self.wheels,
+                                self.wheel_scale, cfg, self.stats, notes)
+        if wheel.corrected is None:
             self.stats.n_no_wheel += 1
-            if T_meas is not None and len(basis):
-                notes.append(f"{len(basis)} degenerate direction(s) without wheel odometry: "
-                             "they rest on the IMU alone (large covariance)")
-        omega_wheel = None
-        if delta_w is not None:
-            omega_wheel = wheel_information(delta_w, cfg.wheel)
-            if wheel_info is not None:
-                cand = np.asarray(wheel_info, dtype=float)
-                if cand.shape == (6, 6) and _finite(cand):
-                    omega_wheel = 0.5 * (cand + cand.T)
-                else:
-                    self.stats.n_rejected_wheel += 1
-                    notes.append("wheel information rejected; using the configured one")
+            if lidar.pose is not None and len(lidar.basis):
+                notes.append(f"{len(lidar.basis)} degenerate direction(s) without wheel "
+                             "odometry: they rest on the IMU alone (large covariance)")
+        plan = self._plan_factors(prev, lidar, wheel, subspace, notes)
+        out = self._solve(prev, t, lidar, wheel, plan, notes)
+        if out is None:
+            self.stats.n_solver_failures += 1
+            self._recover(prev)
+            return None
+        self.stats.n_updates += 1
+        self._consecutive_failures = 0
+        self._after_update(out, prev, dt, lidar, wheel, plan)
+        return out
 
-        if T_meas is not None:
+    def _plan_factors(self, prev: _State, lidar: LidarMeasurement, wheel: WheelIncrement,
+                      subspace: SubspaceMeasurement | None, notes: list[str]) -> _FactorPlan:
+        """Split the information between LiDAR and wheels along the degenerate subspace,
+        prepare the LiDAR subspace factor and, for an absolute LiDAR factor, the degenerate
+        anchor at the wheel prediction."""
+        cfg = self.config
+        if lidar.pose is not None:
             split = split_information(
-                omega_lidar, omega_wheel, basis, length, self.T_base_lidar,
-                epsilon=cfg.lidar.degenerate_epsilon, wheel_weak_scale=cfg.wheel_weak_scale,
-                mode=cfg.lidar.restriction, wheel_mode=cfg.wheel_restriction,
+                lidar.information, wheel.information, lidar.basis, lidar.length,
+                self.T_base_lidar, epsilon=cfg.lidar.degenerate_epsilon,
+                wheel_weak_scale=cfg.wheel_weak_scale, mode=cfg.lidar.restriction,
+                wheel_mode=cfg.wheel_restriction,
             )
         else:  # nothing from the LiDAR: every direction is "degenerate"
             split = split_information(
-                omega_lidar, omega_wheel, np.eye(6), length, self.T_base_lidar,
-                mode=cfg.lidar.restriction,
+                lidar.information, wheel.information, np.eye(6), lidar.length,
+                self.T_base_lidar, mode=cfg.lidar.restriction,
             )
-
-        sub_pose, sub_info = self._subspace_factor(subspace, T_meas, basis, notes)
-
-        # Absolute LiDAR prior: its degenerate components come from the wheel prediction
-        lidar_target, lidar_info, walk_step = T_meas, split.lidar, None
+        sub_pose, sub_info = self._subspace_factor(subspace, lidar.pose, lidar.basis, notes)
+        plan = _FactorPlan(split, lidar.pose, split.lidar, sub_pose, sub_info)
         if (split.lidar is not None and cfg.lidar.factor != "between" and split.dimension
-                and delta_w is not None and omega_wheel is not None
+                and wheel.corrected is not None and wheel.information is not None
                 and cfg.lidar.anchor_sigma > 0.0):
-            lidar_target, omega_anchor = degenerate_anchor(
-                T_meas, T_prev @ delta_w, basis, length, self.T_base_lidar,
-                cfg.lidar.anchor_sigma, reference_covariance=_from_gtsam_matrix(prev.cov_gtsam),
-                reference_information=omega_wheel)
-            lidar_info = split.lidar + omega_anchor
+            # absolute LiDAR prior: its degenerate components come from the wheel prediction
+            plan.lidar_target, omega_anchor = degenerate_anchor(
+                lidar.pose, matrix(prev.pose) @ wheel.corrected, lidar.basis, lidar.length,
+                self.T_base_lidar, cfg.lidar.anchor_sigma,
+                reference_covariance=from_gtsam_matrix(prev.cov_gtsam),
+                reference_information=wheel.information)
+            plan.lidar_information = split.lidar + omega_anchor
             # the anchor is an absolute pseudo-measurement: the graph's marginal along the
             # subspace stops growing, so the wheel random walk is added to the reported one
-            walk_step = float(np.linalg.eigvalsh(covariance_along(
-                np.linalg.inv(omega_wheel), basis, length, self.T_base_lidar)).max())
+            plan.walk_step = float(np.linalg.eigvalsh(covariance_along(
+                np.linalg.inv(wheel.information), lidar.basis, lidar.length,
+                self.T_base_lidar)).max())
+        return plan
 
-        # A graph that the IMU factor makes unsolvable (corrupt but finite samples) is retried
-        # once with the no-IMU fallback before the update is given up.
+    def _solve(self, prev: _State, t: float, lidar: LidarMeasurement, wheel: WheelIncrement,
+               plan: _FactorPlan, notes: list[str]) -> FusionOutput | None:
+        """Add state ``i = prev.index + 1`` with its factors to iSAM2 and read the estimate.
+
+        A graph that the IMU factor makes unsolvable (corrupt but finite samples) is retried
+        once with the no-IMU fallback before the update is given up (None; iSAM2 is then
+        rebuilt at ``prev`` by the caller).
+        """
+        cfg = self.config
+        i = prev.index + 1
+        T_prev = matrix(prev.pose)
+        split = plan.split
         out = None
         saturated = cfg.use_imu and self.imu.saturated(prev.t - cfg.imu.max_gap_s, t, 0.95)
         if saturated:  # clipped samples integrate garbage: bridge with the motion model
             notes.append("IMU samples at the sensor's range: IMU factor skipped")
             self._kernel_holdoff = cfg.lidar.robust_after_updates
         for allow_imu in ((False,) if saturated else (True, False)):
-            # -- motion: IMU preintegration or fallback ------------------------------------------
             graph = gtsam.NonlinearFactorGraph()
             values = gtsam.Values()
-            used_imu = False
-            pim = None
-            if allow_imu and cfg.use_imu and dt <= cfg.max_interval_s:
-                pim = gtsam.PreintegratedCombinedMeasurements(self._params, prev.bias)
-                rep = integrate(self.imu, pim, prev.t, t, cfg.imu.max_gap_s,
-                                cfg.imu.max_extrapolation_s)
-                used_imu = rep.covered
-                if not used_imu:
-                    notes.append(f"no IMU: {rep.reason}")
-            if used_imu:
-                graph.add(gtsam.CombinedImuFactor(X(i - 1), V(i - 1), X(i), V(i), B(i - 1), B(i), pim))
-                nav = pim.predict(gtsam.NavState(prev.pose, prev.velocity), prev.bias)
-                pose_guess, vel_guess = nav.pose(), np.asarray(nav.velocity())
-            else:
-                self.stats.n_no_imu += 1
-                if delta_w is not None:
-                    motion = delta_w
-                    notes.append("no IMU: wheel increment covers the LiDAR-blind directions")
-                else:
-                    motion = exp(self._body_rate * dt)
-                    s_t = max(cfg.no_imu_sigma_floor_translation,
-                              cfg.no_imu_sigma_translation_per_s * dt)
-                    s_r = max(cfg.no_imu_sigma_floor_rotation, cfg.no_imu_sigma_rotation_per_s * dt)
-                    omega_cv = np.diag([s_t**-2] * 3 + [s_r**-2] * 3)
-                    # like the wheels, the motion model only acts where the LiDAR is blind, so a
-                    # LiDAR/motion-model disagreement elsewhere cannot leak into those directions
-                    cv = split_information(
-                        omega_lidar, omega_cv, basis if T_meas is not None else np.eye(6), length,
-                        self.T_base_lidar, mode=cfg.lidar.restriction,
-                    ).wheel
-                    if cv is not None:
-                        graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(motion),
-                                                           _noise_from_information(cv)))
-                    notes.append("no IMU: constant-velocity motion model")
-                pose_guess = prev.pose.compose(gtsam.Pose3(motion))
-                vel_guess = T_prev[:3, :3] @ motion[:3, 3] / dt
-                graph.add(gtsam.PriorFactorVector(
-                    V(i), vel_guess, gtsam.noiseModel.Isotropic.Sigma(3, cfg.no_imu_sigma_velocity)))
-                rw = np.array([cfg.imu.accel_bias_random_walk] * 3 + [cfg.imu.gyro_bias_random_walk] * 3)
-                graph.add(gtsam.BetweenFactorConstantBias(
-                    B(i - 1), B(i), gtsam.imuBias.ConstantBias(),
-                    gtsam.noiseModel.Diagonal.Sigmas(np.maximum(rw * math.sqrt(dt), 1e-9))))
-
-            # -- LiDAR and wheel factors ---------------------------------------------------------
+            used_imu, pose_guess, vel_guess = self._motion_factors(
+                graph, prev, t, allow_imu, lidar, wheel, notes)
+            kernel = None
             used_lidar = split.lidar is not None
             if used_lidar:
-                noise = _noise_from_information(lidar_info)
-                kernel = _robust_kernel(cfg.lidar.robust_kernel, cfg.lidar.robust_threshold)
+                kernel = robust_kernel(cfg.lidar.robust_kernel, cfg.lidar.robust_threshold)
                 # the kernel trusts the IMU prediction: not while it may be wrong (samples at
                 # the sensor's range, or a velocity not yet observed after (re)initialisation)
                 if used_imu and self._kernel_holdoff > 0:
                     kernel = None
-                if kernel is not None:
-                    noise = gtsam.noiseModel.Robust.Create(kernel, noise)
-                if cfg.lidar.factor == "prior":
-                    graph.add(gtsam.PriorFactorPose3(X(i), gtsam.Pose3(lidar_target), noise))
-                elif cfg.lidar.factor == "hybrid":
-                    # absolute in translation and yaw, relative to X(i-1) in roll and pitch
-                    Z = orthonormalize(np.linalg.inv(T_prev) @ T_meas)
-                    for info, factor in (
-                            (restrict_information(lidar_info, _NOT_TILT, _TILT),
-                             lambda n: gtsam.PriorFactorPose3(X(i), gtsam.Pose3(lidar_target), n)),
-                            (restrict_information(lidar_info, _TILT, _NOT_TILT),
-                             lambda n: gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(Z), n))):
-                        part = _noise_from_information(info)
-                        if kernel is not None:
-                            part = gtsam.noiseModel.Robust.Create(kernel, part)
-                        graph.add(factor(part))
-                else:
-                    Z = orthonormalize(np.linalg.inv(T_prev) @ T_meas)
-                    graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(Z), noise))
-            if used_lidar and sub_info is not None:
-                sub_noise = _noise_from_information(sub_info)
-                if kernel is not None:
-                    sub_noise = gtsam.noiseModel.Robust.Create(kernel, sub_noise)
-                graph.add(gtsam.PriorFactorPose3(X(i), gtsam.Pose3(sub_pose), sub_noise))
-            used_wheel = split.wheel is not None and delta_w is not None
+                add_lidar_factors(graph, i, cfg.lidar.factor, T_prev, lidar.pose,
+                                  plan.lidar_target, plan.lidar_information, kernel)
+            if used_lidar and plan.sub_info is not None:
+                add_subspace_factor(graph, i, plan.sub_pose, plan.sub_info, kernel)
+            used_wheel = split.wheel is not None and wheel.corrected is not None
             if used_wheel:
-                graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(delta_w),
-                                                   _noise_from_information(split.wheel)))
+                add_wheel_factor(graph, i, wheel.corrected, split.wheel)
 
             values.insert(X(i), pose_guess)
             values.insert(V(i), np.asarray(vel_guess, dtype=float))
@@ -680,17 +567,65 @@ class FusionEstimator:
                 break
             self._recover(prev)
             notes = notes + ["IMU factor made the update unsolvable; retried without it"]
-        if out is None:
-            self.stats.n_solver_failures += 1
-            self._recover(prev)
-            return None
-        self.stats.n_updates += 1
-        self._consecutive_failures = 0
+        return out
+
+    def _motion_factors(self, graph: gtsam.NonlinearFactorGraph, prev: _State, t: float,
+                        allow_imu: bool, lidar: LidarMeasurement, wheel: WheelIncrement,
+                        notes: list[str]) -> tuple[bool, gtsam.Pose3, np.ndarray]:
+        """The IMU factor ``prev -> i`` or, without IMU coverage, the motion-model fallback
+        (:func:`lili_odom.fusion.factors.add_motion_model_factors`); returns (IMU used,
+        initial pose guess, initial velocity guess [m/s, odometry frame])."""
+        cfg = self.config
+        i = prev.index + 1
+        dt = t - prev.t
+        used_imu = False
+        pim = None
+        if allow_imu and cfg.use_imu and dt <= cfg.max_interval_s:
+            pim = gtsam.PreintegratedCombinedMeasurements(self._params, prev.bias)
+            rep = integrate(self.imu, pim, prev.t, t, cfg.imu.max_gap_s,
+                            cfg.imu.max_extrapolation_s)
+            used_imu = rep.covered
+            if not used_imu:
+                notes.append(f"no IMU: {rep.reason}")
+        if used_imu:
+            graph.add(gtsam.CombinedImuFactor(X(i - 1), V(i - 1), X(i), V(i), B(i - 1), B(i), pim))
+            nav = pim.predict(gtsam.NavState(prev.pose, prev.velocity), prev.bias)
+            return True, nav.pose(), np.asarray(nav.velocity())
+        self.stats.n_no_imu += 1
+        omega_cv = None
+        if wheel.corrected is not None:
+            motion = wheel.corrected
+            notes.append("no IMU: wheel increment covers the LiDAR-blind directions")
+        else:
+            motion = exp(self._body_rate * dt)
+            s_t = max(cfg.no_imu_sigma_floor_translation, cfg.no_imu_sigma_translation_per_s * dt)
+            s_r = max(cfg.no_imu_sigma_floor_rotation, cfg.no_imu_sigma_rotation_per_s * dt)
+            # like the wheels, the motion model only acts where the LiDAR is blind, so a
+            # LiDAR/motion-model disagreement elsewhere cannot leak into those directions
+            omega_cv = split_information(
+                lidar.information, np.diag([s_t**-2] * 3 + [s_r**-2] * 3),
+                lidar.basis if lidar.pose is not None else np.eye(6), lidar.length,
+                self.T_base_lidar, mode=cfg.lidar.restriction,
+            ).wheel
+            notes.append("no IMU: constant-velocity motion model")
+        pose_guess = prev.pose.compose(gtsam.Pose3(motion))
+        vel_guess = matrix(prev.pose)[:3, :3] @ motion[:3, 3] / dt
+        add_motion_model_factors(graph, i, motion, omega_cv, vel_guess, dt, cfg)
+        return False, pose_guess, vel_guess
+
+    def _after_update(self, out: FusionOutput, prev: _State, dt: float,
+                      lidar: LidarMeasurement, wheel: WheelIncrement, plan: _FactorPlan) -> None:
+        """Post-update calibration and bookkeeping: gravity tracking, the anchor's random walk
+        in the reported covariance, the wheel scale, the motion model's body rate, the robust
+        kernel's hold-off, IMU buffer pruning and the periodic graph reset."""
+        cfg = self.config
+        i = out.index
+        T_meas, basis, length = lidar.pose, lidar.basis, lidar.length
         if out.used_lidar and T_meas is not None and cfg.gravity_tracking_gain > 0.0:
             self._track_gravity(T_meas, out.pose, basis, dt)
             out.gravity_tilt = self._gravity_tilt.copy()
-        if walk_step is not None and out.used_lidar:
-            self._anchor_walk += walk_step
+        if plan.walk_step is not None and out.used_lidar:
+            self._anchor_walk += plan.walk_step
             out.covariance = inflate_along(out.covariance, basis, self._anchor_walk, length,
                                            self.T_base_lidar)
         else:
@@ -699,17 +634,17 @@ class FusionEstimator:
         # the direction of travel (not on the fused poses, which lag them by the fusion's
         # compromise)
         T_scale = None
-        if T_meas is not None and out.used_lidar and raw_wheel is not None:
-            T_scale = self._scale_measurement(T_meas, raw_wheel, split.lidar, basis, sub_pose,
-                                              sub_info)
+        if T_meas is not None and out.used_lidar and wheel.raw is not None:
+            T_scale = self._scale_measurement(T_meas, wheel.raw, plan.split.lidar, basis,
+                                              plan.sub_pose, plan.sub_info)
         if (T_scale is not None and self._last_meas is not None
                 and self._last_meas[0] == i - 1):
-            self.wheel_scale.observe(raw_wheel, np.linalg.inv(self._last_meas[1]) @ T_scale)
+            self.wheel_scale.observe(wheel.raw, np.linalg.inv(self._last_meas[1]) @ T_scale)
         else:
             self.wheel_scale.interrupt()
         self._last_meas = (i, T_scale) if T_scale is not None else None
         if dt >= 0.01:  # shorter intervals turn registration noise into absurd rates
-            rate = log(np.linalg.inv(T_prev) @ out.pose) / dt
+            rate = log(np.linalg.inv(matrix(prev.pose)) @ out.pose) / dt
             # the constant-velocity fallback never extrapolates faster than the plausibility gates
             for part, limit in ((slice(0, 3), cfg.max_speed), (slice(3, 6), cfg.max_rate)):
                 n = float(np.linalg.norm(rate[part]))
@@ -723,7 +658,6 @@ class FusionEstimator:
         self._since_reset += 1
         if self._since_reset >= max(1, cfg.reset_every):
             self._reset()
-        return out
 
     def _subspace_factor(self, subspace: SubspaceMeasurement | None, T_meas: np.ndarray | None,
                          basis: np.ndarray, notes: list[str]
@@ -738,13 +672,13 @@ class FusionEstimator:
         cfg = self.config.lidar
         if subspace is None or not cfg.subspace_information or T_meas is None or not len(basis):
             return None, None
-        pose = _as_pose(getattr(subspace, "pose", None))
+        pose = as_pose(getattr(subspace, "pose", None))
         try:
             info = np.asarray(subspace.information_scaled, dtype=float)
             length = float(subspace.length)
         except (AttributeError, TypeError, ValueError):
             info, length = np.full((6, 6), np.nan), math.nan
-        if (pose is None or info.shape != (6, 6) or not _finite(info)
+        if (pose is None or info.shape != (6, 6) or not finite(info)
                 or not (math.isfinite(length) and 1e-3 <= length <= 1e6)):
             self.stats.n_rejected_lidar_information += 1
             notes.append("LiDAR subspace measurement rejected")
@@ -798,7 +732,7 @@ class FusionEstimator:
     @gravity_tilt.setter
     def gravity_tilt(self, tilt: np.ndarray) -> None:
         tilt = np.asarray(tilt, dtype=float).reshape(2)
-        if not _finite(tilt):
+        if not finite(tilt):
             raise ValueError("gravity tilt must be finite")
         self._set_gravity_tilt(tilt)
 
@@ -831,7 +765,7 @@ class FusionEstimator:
             if np.any(tilt_part > 0.3 * np.linalg.norm(basis, axis=1)):
                 return
         d = np.asarray(gtsam.Rot3.Logmap(gtsam.Rot3(T_meas[:3, :3] @ T_fused[:3, :3].T)))[:2]
-        if not _finite(d) or np.linalg.norm(d) > cfg.gravity_tracking_gate:
+        if not finite(d) or np.linalg.norm(d) > cfg.gravity_tracking_gate:
             return
         alpha = min(1.0, max(0.0, dt) / cfg.gravity_tracking_window_s)
         self._tilt_difference += alpha * (d - self._tilt_difference)
@@ -845,15 +779,6 @@ class FusionEstimator:
             tilt *= cfg.gravity_tracking_max / n
         self._set_gravity_tilt(tilt)
 
-    def _plausible(self, delta: np.ndarray, dt: float) -> bool:
-        """True when the increment (4x4) is physically possible within ``dt`` seconds."""
-        cfg = self.config
-        trans = float(np.linalg.norm(delta[:3, 3]))
-        cos_angle = 0.5 * (float(np.trace(delta[:3, :3])) - 1.0)
-        angle = math.acos(min(1.0, max(-1.0, cos_angle)))
-        return (trans <= cfg.max_speed * dt + cfg.gate_margin_translation
-                and angle <= cfg.max_rate * dt + cfg.gate_margin_rotation)
-
     # ---------------------------------------------------------------------------------------
     # bookkeeping
 
@@ -866,7 +791,7 @@ class FusionEstimator:
         bias = est.atConstantBias(B(i))
         cov_g = np.asarray(self._isam.marginalCovariance(X(i)), dtype=float)
         T = matrix(pose)
-        if not _finite(T, vel, bias.vector(), cov_g) or not self._sane(T, vel, bias, cov_g):
+        if not finite(T, vel, bias.vector(), cov_g) or not self._sane(T, vel, bias, cov_g):
             return None
         self._state = _State(t, i, pose, vel, bias, cov_g)
         self._history.append((t, T))
@@ -874,7 +799,7 @@ class FusionEstimator:
             t=t, index=i, pose=T, velocity=vel,
             accel_bias=np.asarray(bias.accelerometer(), dtype=float),
             gyro_bias=np.asarray(bias.gyroscope(), dtype=float),
-            covariance=_from_gtsam_matrix(cov_g), degenerate_dimension=dim,
+            covariance=from_gtsam_matrix(cov_g), degenerate_dimension=dim,
             used_lidar=used_lidar, used_imu=used_imu, used_wheel=used_wheel, notes=notes,
             gravity_tilt=self._gravity_tilt.copy(),
         )
@@ -905,7 +830,7 @@ class FusionEstimator:
         graph = gtsam.NonlinearFactorGraph()
         try:
             info = np.asarray(self._isam.jointMarginalInformation(keys).fullMatrix(), dtype=float)
-            if info.shape != (15, 15) or not _finite(info):
+            if info.shape != (15, 15) or not finite(info):
                 raise ValueError("bad joint marginal")
             R = np.linalg.qr(sqrt_information(info), mode="r")
             jf = gtsam.JacobianFactor(keys[0], R[:, 0:6], keys[1], R[:, 6:9], keys[2],
@@ -989,8 +914,8 @@ class FusionEstimator:
         if s is None or not t > s.t:
             return None
         delta = self.wheels.delta(s.t, t)
-        delta = _as_pose(delta) if delta is not None else None
-        if delta is None or not self._plausible(delta, t - s.t):
+        delta = as_pose(delta) if delta is not None else None
+        if delta is None or not plausible(delta, t - s.t, self.config):
             return None
         return matrix(s.pose) @ self.wheel_scale.correct(delta)
 

@@ -289,9 +289,8 @@ def degenerate_anchor(
 
     With an *absolute* LiDAR factor and nothing but relative wheel/IMU factors along the
     degenerate subspace, the position along it is decided by what little information the
-    restricted factor keeps near the subspace. On the simulated tunnel the trajectory drifted
-    along the axis against the wheels, by amounts that changed with minor settings (suspected:
-    spurious components of the detected basis). Replacing the measurement's degenerate
+    restricted factor keeps near the subspace, which small spurious components of the detected
+    basis can move along the axis against the wheels. Replacing the measurement's degenerate
     components by a reference pose (the wheel prediction: Zhang & Singh's solution remapping)
     and holding them with ``sigma`` gives that direction to the wheels.
 

@@ -20,10 +20,9 @@ the axis and pins the position to it. Holding costs, at a real exit from the deg
 place, the wheels' error over that distance. ``hold_warmup_m`` > 0 limits the hold to the
 first metres of travel after the local map was (re)started: a map built from a few scans of a
 moving sensor is mostly the ground rings of those scans, which can hold the registration (and
-the detector's verdict) along a featureless axis until the map spans several scan positions
-(``benchmarks/start_while_moving.py``). The defaults and their
-effect on the detected subspace and the odometry are measured by
-``benchmarks/detection_cost.py`` (results in ``benchmarks/results/detection_cost.md``).
+the detector's verdict) along a featureless axis until the map spans several scan positions.
+How the defaults affect the detected subspace, the odometry and the time per scan:
+``docs/performance.md`` and ``docs/design/fusion.md``.
 
 Frames: ``pose`` arguments are 4x4 sensor (os_lidar) poses in the odometry frame [m]; basis
 twists are ``(v, w)`` in the sensor's body frame (:mod:`lili_odom.degeneracy.result`).
@@ -44,9 +43,7 @@ class DetectionScheduleConfig:
         max_reuse: consecutive scans that may reuse one detection (0: detect every scan).
             Default 6: at the Husky's 0.8-1 m/s the 0.5 m bound ends a reuse after 5-6
             scans, so the detector runs about once per 0.5 m of travel (at least every 7th
-            scan when slower); 4 before. The subspaces agree with the paper's every-scan
-            detection as well as the detector agrees with itself from one scan to the next
-            (``benchmarks/results/detection_cost_schedule``).
+            scan when slower).
         reuse_distance_m: re-detect once the sensor moved this far from the detection [m].
         reuse_angle_deg: re-detect once the sensor turned this much from the detection [deg].
         hold_distance_m: a degenerate subspace is merged into the following results until

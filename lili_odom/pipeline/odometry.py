@@ -53,7 +53,7 @@ METHODS = ("lili", "zhang", "hessian", "none")
 
 @dataclass
 class PipelineConfig:
-    """Everything the pipeline needs (mirrored by ``config/lili_odom.yaml``).
+    """Everything the pipeline needs (the ``pipeline.*`` parameters of the node).
 
     Attributes:
         method: degeneracy detector, one of ``METHODS``.
@@ -77,14 +77,13 @@ class PipelineConfig:
             that pose is what the LiDAR factor measures; 0 = the unconstrained
             registration. Needed by an absolute LiDAR factor (``fusion.lidar.factor``
             ``hybrid`` or ``prior``): without it the registration's slide along the axis
-            leaks into the kept components and pins the axial position to the slide
-            (``benchmarks/lidar_factor.py``).
+            leaks into the kept components and pins the axial position to the slide.
         plane_refinement: the point-to-plane refinement inside a detected subspace whose
             information the fusion keeps (``fusion.lidar.subspace_information``).
         scan_matcher / fusion / lili / zhang / hessian: the stages' own configurations; in
             the odometry LiLi stops a perturbed re-registration once it has come back
-            (``lili.return_ratio`` 0.1, README, Speed), the standalone detector
-            (``lili-odom detect``, the shape benchmark) runs each to convergence.
+            (``lili.return_ratio`` 0.1), the standalone detector (``lili-odom detect``) runs
+            each to convergence.
     """
 
     method: str = "lili"

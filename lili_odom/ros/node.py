@@ -57,7 +57,7 @@ pipeline and the path are reset.
 Not driven by the node: ``ground_truth_topic`` (offline evaluation only).
 
 Parameters: the provider's (``lili_odom.config.NodeConfig``'s dotted names, as in
-``config/lili_odom.yaml``) plus :data:`NODE_PARAMETERS`; all are declared with dynamic typing
+``config/lili_odom.yaml`` and ``config/lili_odom_advanced.yaml``) plus :data:`NODE_PARAMETERS`; all are declared with dynamic typing
 and validated by the provider, so a bad value stops the node with a one-line error.
 """
 from __future__ import annotations
@@ -79,6 +79,7 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityP
 from rcl_interfaces.msg import ParameterDescriptor
 
 from lili_odom import messages as M
+from lili_odom.config import coerce_parameter
 from lili_odom.io.map_file import MapAccumulator, save_points
 from lili_odom.pipeline.feeder import MessageFeeder
 from lili_odom.pipeline.types import OdometryOutput
@@ -259,7 +260,7 @@ class LiliOdomNode(Node):
             if isinstance(got, (array.array, tuple)):
                 got = list(got)
             if name in NODE_PARAMETERS and got is not None:
-                got = _coerce(name, got, NODE_PARAMETERS[name])
+                got = coerce_parameter(name, got, NODE_PARAMETERS[name])
             values[name] = got
         return values
 
@@ -538,27 +539,6 @@ def main(args: list[str] | None = None,
             node.destroy_node()
         rclpy.try_shutdown()
     return 0
-
-
-def _coerce(name: str, value: Any, default: Any) -> Any:
-    """A node parameter value converted to the type of its default (ValueError names it)."""
-    try:
-        if isinstance(default, bool):
-            if not isinstance(value, bool):
-                raise ValueError
-            return value
-        if isinstance(default, int):
-            if isinstance(value, bool) or int(value) != value:
-                raise ValueError
-            return int(value)
-        if isinstance(default, float):
-            if isinstance(value, bool):
-                raise ValueError
-            return float(value)
-        return type(default)(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"parameter '{name}' must be a {type(default).__name__}, "
-                         f"got {value!r}") from None
 
 
 def parameters_from_mapping(values: Mapping[str, Any]) -> list[Parameter]:

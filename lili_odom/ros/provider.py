@@ -44,7 +44,8 @@ class OdometryPipelineProvider:
     """Serves the real ``OdometryPipeline`` configured through ``lili_odom.config.NodeConfig``.
 
     The parameters are NodeConfig's dotted names (``lidar_topic``, ``extrinsics.*``,
-    ``pipeline.lili.k`` ...), the same as ``config/lili_odom.yaml``. ``create`` applies only the
+    ``pipeline.lili.k`` ...): the robot settings of ``config/lili_odom.yaml`` together with the
+    tuning of ``config/lili_odom_advanced.yaml``. ``create`` applies only the
     names NodeConfig knows (node-only extras such as ``path_period`` are ignored here) and
     raises ``ValueError`` naming a bad parameter.
     """

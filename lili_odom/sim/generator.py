@@ -36,6 +36,7 @@ from lili_odom.sim import world as world_mod
 from lili_odom.sim.bag_writer import TOPICS, SimBagWriter
 from lili_odom.sim.imu import simulate_imu
 from lili_odom.sim.lidar import LidarSimulator
+from lili_odom.sim.mesh import build_mesh
 from lili_odom.sim.ros_messages import MessageFactory
 from lili_odom.sim.sensors import SensorSuite, default_sensors
 from lili_odom.sim.trajectory import Trajectory
@@ -104,8 +105,8 @@ class BagSummary:
         return self.scans / max(self.wall_time, 1e-9)
 
 
-_SOURCES = ("world.py", "trajectory.py", "lidar.py", "imu.py", "wheels.py", "sensors.py",
-            "ros_messages.py", "bag_writer.py", "generator.py")
+_SOURCES = ("world.py", "layout.py", "mesh.py", "trajectory.py", "lidar.py", "imu.py", "wheels.py",
+            "sensors.py", "ros_messages.py", "bag_writer.py", "generator.py")
 
 
 def code_version() -> str:
@@ -143,7 +144,7 @@ class Simulation:
     @property
     def lidar(self) -> LidarSimulator:
         if self._lidar is None:
-            mesh = world_mod.build_mesh(self.world, self.req.feature_density)
+            mesh = build_mesh(self.world, self.req.feature_density)
             self._lidar = LidarSimulator(self.sensors.lidar, mesh)
         return self._lidar
 

@@ -21,8 +21,8 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
+from lili_odom.sim.mesh import SceneMesh
 from lili_odom.sim.sensors import LidarConfig
-from lili_odom.sim.world import SceneMesh
 
 __all__ = ["RayCaster", "Scan", "LidarSimulator"]
 

@@ -22,6 +22,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lili_odom.extrinsics import (HUSKY_BASE_TO_SENSOR, OS1_SENSOR_TO_IMU, OS1_SENSOR_TO_LIDAR,
+                                  pose_from_xyz_rpy)
+
 __all__ = [
     "LidarConfig",
     "ImuConfig",
@@ -32,14 +35,6 @@ __all__ = [
     "default_sensors",
     "parse_resolution",
 ]
-
-
-def _T(translation=(0.0, 0.0, 0.0), yaw_deg: float = 0.0) -> np.ndarray:
-    c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
-    T = np.eye(4)
-    T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
-    T[:3, 3] = translation
-    return T
 
 
 @dataclass
@@ -138,11 +133,11 @@ class Extrinsics:
 
     # base_link -> os_sensor: OS1 on a 0.40 m mast on the Husky top plate, 0.10 m forward of
     # the centre (top plate at ~0.25 m above base_link). A plausible research mount.
-    base_to_sensor: np.ndarray = field(default_factory=lambda: _T((0.10, 0.0, 0.65)))
+    base_to_sensor: np.ndarray = field(default_factory=lambda: pose_from_xyz_rpy(HUSKY_BASE_TO_SENSOR))
     # os_sensor -> os_lidar: [OS1] lidar_to_sensor_transform, 180 deg yaw and 36.18 mm up
-    sensor_to_lidar: np.ndarray = field(default_factory=lambda: _T((0.0, 0.0, 0.03618), 180.0))
+    sensor_to_lidar: np.ndarray = field(default_factory=lambda: pose_from_xyz_rpy(OS1_SENSOR_TO_LIDAR))
     # os_sensor -> os_imu: [OS1] imu_to_sensor_transform, (6.253, -11.775, 7.645) mm, no rotation
-    sensor_to_imu: np.ndarray = field(default_factory=lambda: _T((0.006253, -0.011775, 0.007645)))
+    sensor_to_imu: np.ndarray = field(default_factory=lambda: pose_from_xyz_rpy(OS1_SENSOR_TO_IMU))
 
     @property
     def base_to_lidar(self) -> np.ndarray:

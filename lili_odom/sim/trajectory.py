@@ -17,8 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from lili_odom.sim.layout import Centreline, FloorField
 from lili_odom.sim.sensors import HuskyConfig
-from lili_odom.sim.world import Centreline, FloorField, TrialPlan, WorldDescription
+from lili_odom.sim.world import TrialPlan, WorldDescription
 
 __all__ = ["Trajectory", "Kinematics"]
 

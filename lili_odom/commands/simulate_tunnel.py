@@ -22,7 +22,7 @@ from lili_odom.errors import UserError
 from lili_odom.sim.generator import SimRequest, ensure_trial_bag, simulate_bag
 from lili_odom.sim.sensors import parse_resolution
 
-__all__ = ["add_arguments", "run", "ensure_trial_bag"]
+__all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
