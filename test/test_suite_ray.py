@@ -214,7 +214,10 @@ def ray_instance():
 
     for k, v in LOCAL_RAY_ENV.items():
         os.environ.setdefault(k, v)
-    ray = pytest.importorskip("ray")
+    try:
+        import ray
+    except ImportError:
+        pytest.skip("Ray is not installed (pip install 'lili_odom[cluster]')")
     _loopback_only()
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
     try:
