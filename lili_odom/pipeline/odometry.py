@@ -126,6 +126,16 @@ class PipelineConfig:
         self.lili.validate()
 
 
+@dataclass
+class _AlongTrack:
+    """Outcome of the along-track check: the refined pose (``ok``) or the direction of travel
+    as a degenerate subspace."""
+
+    ok: bool
+    pose: np.ndarray
+    degeneracy: DegeneracyResult | None
+
+
 def make_detector(config: PipelineConfig):
     """The configured detector object, or None for ``none``."""
     if config.method == "lili":
@@ -353,6 +363,17 @@ class OdometryPipeline:
 
         t0 = time.perf_counter()
         measured = reg.pose
+        along = None
+        if (degeneracy is not None and degeneracy.ok and not degeneracy.degenerate
+                and self._last_output is not None):
+            along = self._along_track(map_points, reg.pose, guess, degeneracy)
+            if along is not None and along.ok:
+                measured = along.pose
+            elif along is not None:
+                degeneracy = along.degeneracy
+        timings["along_track"] = time.perf_counter() - t0
+
+        t0 = time.perf_counter()
         if (self.config.remap_iterations and degeneracy is not None and degeneracy.ok
                 and degeneracy.degenerate):
             # the wheels' prediction where there is one: the IMU prediction carries the fused
@@ -384,21 +405,6 @@ class OdometryPipeline:
                                                    degeneracy.characteristic_length)
             else:
                 self.counters["refinement_failures"] += 1
-        elif (refine.enabled and refine.along_track and reg.ok and not first
-              and self._last_output is not None
-              and (degeneracy is None or (degeneracy.ok and not degeneracy.degenerate))):
-            # constrained (or no detector): point-to-point's sensor-fixed sampling pattern
-            # drags the registration back along the direction of travel; point-to-plane
-            # along that one direction removes the drag
-            previous = self._last_output.pose @ T_bl
-            travel = reg.pose[:3, :3].T @ (guess[:3, 3] - previous[:3, 3])
-            if np.linalg.norm(travel) >= refine.min_travel_m:
-                direction = np.concatenate([travel / np.linalg.norm(travel), np.zeros(3)])
-                refined = refine_in_subspace(map_points, self._matcher.reference, reg.pose,
-                                             direction[None, :], 1.0, refine)
-                if refined.ok and refined.information[0, 0] >= refine.min_along_information:
-                    measured = refined.pose
-                    self.counters["along_track_refined"] += 1
         timings["refine"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
@@ -446,6 +452,38 @@ class OdometryPipeline:
         self._last_output = out
         self.counters["processed"] += 1
         return out
+
+    def _along_track(self, points: np.ndarray, pose: np.ndarray, guess: np.ndarray,
+                     degeneracy: DegeneracyResult):
+        """Point-to-plane along the direction of travel of a registration LiLi found
+        constrained (``plane_refinement.along_track``), or None when it does not apply.
+
+        Point-to-point ICP against a local map built from a moving sensor's scans is pulled
+        back towards the earlier poses along the direction of travel (the scans' ring and
+        column patterns are fixed to the sensor), and LiLi's perturbations are held by the
+        same pull, so they come back and the direction looks constrained. Point-to-plane has
+        no such pull: when it holds the direction (information >= ``min_along_information``)
+        its pose is the measurement (``ok``); when it does not (a featureless tunnel seen
+        through a young map), the direction of travel is the degenerate subspace
+        (``ok`` False, ``degeneracy`` set).
+        """
+        cfg = self.config.plane_refinement
+        if not (cfg.enabled and cfg.along_track):
+            return None
+        previous = self._last_output.pose @ self.T_base_lidar
+        travel = pose[:3, :3].T @ (guess[:3, 3] - previous[:3, 3])
+        n = float(np.linalg.norm(travel))
+        if n < cfg.min_travel_m:
+            return None
+        direction = np.concatenate([travel / n, np.zeros(3)])[None, :]  # scaled = plain
+        refined = refine_in_subspace(points, self._matcher.reference, pose, direction, 1.0, cfg)
+        if refined.ok and refined.information[0, 0] >= cfg.min_along_information:
+            self.counters["along_track_refined"] += 1
+            return _AlongTrack(True, refined.pose, None)
+        self.counters["along_track_degenerate"] += 1
+        details = {**degeneracy.details, "along_track": True}
+        return _AlongTrack(False, pose, replace(degeneracy, basis_scaled=direction,
+                                                 details=details))
 
     def _clear_held_directions(self, degeneracy: DegeneracyResult, refined
                                ) -> tuple[DegeneracyResult, np.ndarray]:

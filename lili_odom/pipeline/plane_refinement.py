@@ -68,17 +68,15 @@ class PlaneRefinementConfig:
         max_step: largest Gauss-Newton step in the subspace [m, scaled]; default 0.3.
         debias: subtract the expected contribution of the plane fits' normal noise from the
             information (``_debiased``); default True.
-        along_track: on a scan without a degenerate subspace, refine the registration along
-            its direction of travel (the predicted translation since the previous scan) and
-            use that as the LiDAR measurement. Point-to-point ICP against a local map built
-            from a moving sensor's scans is pulled back towards the earlier poses along the
-            direction of travel (ring and column patterns are fixed to the sensor), most on a
-            young map and in corridors; point-to-plane residuals do not have that pull.
-            Default True.
+        along_track: on a scan the detector found constrained, refine the registration along
+            its direction of travel (the predicted translation since the previous scan): with
+            at least ``min_along_information`` the refined pose is the LiDAR measurement,
+            else the direction of travel is taken as degenerate
+            (:meth:`lili_odom.pipeline.odometry.OdometryPipeline._along_track`). Default True.
         min_travel_m: predicted travel since the previous scan below which there is no
             along-track refinement [m]; default 0.01.
-        min_along_information: the along-track refinement is used only when its information
-            is at least this [1/m^2] (default 100: a 10 cm sigma).
+        min_along_information: information [1/m^2] along the direction of travel from which
+            the along-track refinement counts as holding it (default 100: a 10 cm sigma).
         clear_information: a detected direction along which the refinement's information is
             at least this [1/m^2] is measured by the refined pose like a constrained one and
             removed from the degenerate subspace (default 2500: a 2 cm sigma, the configured
