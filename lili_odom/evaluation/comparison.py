@@ -1,8 +1,9 @@
-"""Comparing configurations over runs: run names, the table over seeds, paired differences.
+"""Tables that compare parameter files over a set of runs: run names, per-run error tables,
+paired differences and the reuse of stored runs.
 
-A *run row* is a dict with at least ``config`` (the run's name, :func:`run_label`) and the
-measured errors in metres (``ate_m``, ``rpe_m``, ``final_m``), plus what identifies the run
-(``trial``, ``seed``, ``start`` [s], ``repeat``).
+A *run row* is a dict with ``config`` (the run's name, :func:`run_label`), its errors in
+metres (``ate_m``, ``rpe_m``, ``final_m``) and the keys that identify it (``trial``, ``seed``,
+``start`` [s], ``repeat``).
 """
 from __future__ import annotations
 
@@ -22,8 +23,9 @@ def run_label(config: str, method: str = "lili") -> str:
 
 def seeds_table(rows: list[dict], trials: list[int], seeds: list[int], labels: list[str],
                 targets: dict[int, dict[str, float]]) -> list[str]:
-    """Markdown lines: per trial and run name, ATE / RPE [m] per seed, mean, worst, and how
-    many seeds meet ``targets[trial]`` (``{"ate_m": .., "rpe_m": ..}``, upper bounds)."""
+    """Markdown lines: per trial and run name, ATE / RPE [m] of each run in ``seeds``, their
+    mean and worst, and how many are within ``targets[trial]`` (``{"ate_m": .., "rpe_m": ..}``,
+    upper bounds)."""
     lines = ["| trial | configuration | " + " | ".join(f"seed {s}" for s in seeds)
              + " | mean | worst | target |", "|---|---|" + "---|" * (len(seeds) + 3)]
     for trial in trials:
