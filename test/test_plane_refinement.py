@@ -123,3 +123,65 @@ def test_the_odometry_clears_directions_point_to_plane_holds():
         clear_information=0.0)))
     same, same_info = off._clear_held_directions(det, refined)
     assert same.dimension == 2 and np.allclose(same_info, refined.information_scaled)
+
+
+def _pipeline_over(world: np.ndarray, previous_x: float):
+    """An odometry pipeline whose local map is ``world`` and whose previous output had the
+    LiDAR at ``pose_at(previous_x)``."""
+    from types import SimpleNamespace
+
+    from lili_odom.pipeline.odometry import OdometryPipeline, PipelineConfig
+
+    pipeline = OdometryPipeline(PipelineConfig())
+    pipeline._matcher = SimpleNamespace(reference=ReferenceMap.from_points(world, 1.0, 200))
+    T_lidar_base = np.linalg.inv(pipeline.T_base_lidar)
+    pipeline._last_output = SimpleNamespace(pose=pose_at(previous_x) @ T_lidar_base)
+    return pipeline
+
+
+YAW = np.array([[0, 0, 0, 0, 0, 1.0]])
+
+
+def test_weak_directions_add_what_point_to_plane_does_not_hold():
+    from lili_odom.degeneracy.result import DegeneracyResult
+
+    tube = corridor(200.0, end_walls=False)
+    pipeline = _pipeline_over(tube, 99.9)
+    none = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0)
+    weak = pipeline._weak_directions(scan_at(tube, 100.0), pose_at(100.0), none)
+    assert weak is not None and weak.dimension == 1 and weak.details["weak"] == 1
+    assert abs(weak.basis_scaled[0, 0]) > 0.99  # the tube's axis
+    # a direction already detected is not added again
+    axis = DegeneracyResult("lili", np.eye(4), AXIS_X, 10.0)
+    assert pipeline._weak_directions(scan_at(tube, 100.0), pose_at(100.0), axis) is None
+
+    boxed = corridor(40.0, end_walls=True)
+    held = _pipeline_over(boxed, 19.9)
+    assert held._weak_directions(scan_at(boxed, 20.0), pose_at(20.0), none) is None
+    off = _pipeline_over(tube, 99.9)
+    off.config.plane_refinement.weak_information = 0.0
+    assert off._weak_directions(scan_at(tube, 100.0), pose_at(100.0), none) is None
+
+
+def test_along_track_covers_the_travel_outside_a_detected_subspace():
+    from lili_odom.degeneracy.result import DegeneracyResult
+
+    # yaw detected, the sensor travels along x: the travel is checked, and the end walls
+    # move a registration left 20 cm behind back to the truth
+    boxed = corridor(40.0, end_walls=True)
+    pipeline = _pipeline_over(boxed, 24.9)
+    yaw = DegeneracyResult("lili", np.eye(4), YAW, 10.0)
+    along = pipeline._along_track(scan_at(boxed, 25.0), pose_at(24.8), pose_at(25.0), yaw)
+    assert along is not None and along.ok
+    assert abs(along.pose[0, 3] - 25.0) < 0.03
+    # in a tube the travel joins the detected subspace
+    tube = corridor(200.0, end_walls=False)
+    pipeline = _pipeline_over(tube, 99.9)
+    along = pipeline._along_track(scan_at(tube, 100.0), pose_at(100.0), pose_at(100.0), yaw)
+    assert along is not None and not along.ok
+    assert along.degeneracy.dimension == 2 and along.degeneracy.details["along_track"]
+    assert np.allclose(np.abs(along.degeneracy.basis_scaled[1]), AXIS_X[0], atol=1e-9)
+    # travel inside the detected subspace: nothing to check
+    axis = DegeneracyResult("lili", np.eye(4), AXIS_X, 10.0)
+    assert pipeline._along_track(scan_at(tube, 100.0), pose_at(100.0), pose_at(100.0),
+                                 axis) is None

@@ -363,31 +363,24 @@ class OdometryPipeline:
 
         t0 = time.perf_counter()
         measured = reg.pose
-        along = None
-        if (degeneracy is not None and degeneracy.ok and not degeneracy.degenerate
-                and self._last_output is not None):
-            along = self._along_track(map_points, reg.pose, guess, degeneracy)
+        if self._remaps(degeneracy):
+            measured = self._remap(source, reg.pose, guess, t_ref, degeneracy)
+        timings["remap"] = time.perf_counter() - t0
+
+        t0 = time.perf_counter()
+        if degeneracy is not None and degeneracy.ok and self._last_output is not None:
+            weak = self._weak_directions(map_points, measured, degeneracy)
+            if weak is not None:
+                degeneracy = weak
+                measured = self._remap(source, reg.pose, guess, t_ref, degeneracy)
+            along = self._along_track(map_points, measured, guess, degeneracy)
             if along is not None and along.ok:
                 measured = along.pose
             elif along is not None:
                 degeneracy = along.degeneracy
+                if self._remaps(degeneracy):
+                    measured = self._remap(source, reg.pose, guess, t_ref, degeneracy)
         timings["along_track"] = time.perf_counter() - t0
-
-        t0 = time.perf_counter()
-        if (self.config.remap_iterations and degeneracy is not None and degeneracy.ok
-                and degeneracy.degenerate):
-            # the wheels' prediction where there is one: the IMU prediction carries the fused
-            # velocity, which a measurement held at it would only confirm
-            wheel = est.wheel_prediction(t_ref)
-            reference = guess if wheel is None else wheel @ T_bl
-            remapped = constrained_registration(
-                lambda pose: self._matcher.step(source, pose), reg.pose, reference,
-                degeneracy.basis_scaled, degeneracy.characteristic_length,
-                self.config.remap_iterations)
-            measured = remapped.pose
-            if not remapped.ok:
-                self.counters["remap_failures"] += 1
-        timings["remap"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
         subspace = None
@@ -453,19 +446,81 @@ class OdometryPipeline:
         self.counters["processed"] += 1
         return out
 
+    def _remaps(self, degeneracy: DegeneracyResult | None) -> bool:
+        return bool(self.config.remap_iterations and degeneracy is not None and degeneracy.ok
+                    and degeneracy.degenerate)
+
+    def _remap(self, source: np.ndarray, registered: np.ndarray, guess: np.ndarray,
+               t_ref: float, degeneracy: DegeneracyResult) -> np.ndarray:
+        """The registration held at the wheels' prediction along the degenerate subspace
+        (solution remapping), ``T_odom_lidar``.
+
+        The wheels' prediction where there is one: the IMU prediction carries the fused
+        velocity, which a measurement held at it would only confirm.
+        """
+        wheel = self.estimator.wheel_prediction(t_ref)
+        reference = guess if wheel is None else wheel @ self.T_base_lidar
+        remapped = constrained_registration(
+            lambda pose: self._matcher.step(source, pose), registered, reference,
+            degeneracy.basis_scaled, degeneracy.characteristic_length,
+            self.config.remap_iterations)
+        if not remapped.ok:
+            self.counters["remap_failures"] += 1
+        return remapped.pose
+
+    def _weak_directions(self, points: np.ndarray, pose: np.ndarray,
+                         degeneracy: DegeneracyResult) -> DegeneracyResult | None:
+        """The detection with the directions outside its subspace that point-to-plane barely
+        holds added (``plane_refinement.weak_information``), or None when there are none.
+
+        LiLi asks whether point-to-point re-registrations come back; against a young or sparse
+        map a direction can come back to a point-to-point optimum that the scene does not fix
+        (open ground: the ground's rings, fixed to the sensor, hold x, y and yaw wherever the
+        last scans left them). The debiased point-to-plane information of the registration
+        (:func:`lili_odom.pipeline.plane_refinement.refine_in_subspace` over all six scaled
+        twists, no step) tells such directions: the ground's normals say nothing about
+        them. Directions it holds are left to LiLi.
+        """
+        cfg = self.config.plane_refinement
+        if not (cfg.enabled and cfg.weak_information > 0):
+            return None
+        B = degeneracy.basis_scaled
+        if B.shape[0] >= 6:
+            return None
+        length = degeneracy.characteristic_length
+        full = refine_in_subspace(points, self._matcher.reference, pose, np.eye(6), length,
+                                  replace(cfg, iterations=0))
+        if not full.ok:
+            return None
+        _, _, vt = np.linalg.svd(B, full_matrices=True) if len(B) else (None, None, np.eye(6))
+        C = vt[B.shape[0]:]  # orthonormal complement of the subspace
+        w, V = np.linalg.eigh(C @ full.information @ C.T)
+        weak = w < cfg.weak_information
+        if not weak.any():
+            return None
+        self.counters["weak_directions"] += int(weak.sum())
+        rows = (V[:, weak].T @ C)
+        details = {**degeneracy.details, "weak": int(weak.sum())}
+        return replace(degeneracy, basis_scaled=np.vstack([B, rows]), details=details)
+
     def _along_track(self, points: np.ndarray, pose: np.ndarray, guess: np.ndarray,
                      degeneracy: DegeneracyResult):
-        """Point-to-plane along the direction of travel of a registration LiLi found
+        """Point-to-plane along the direction of travel where the detector found it
         constrained (``plane_refinement.along_track``), or None when it does not apply.
 
+        The direction is the predicted translation since the previous scan (LiDAR frame)
+        without its part inside the detected subspace (scaled twists, characteristic length
+        of the detection); it applies when at least ``min_along_share`` of the travel is left.
         Point-to-point ICP against a local map built from a moving sensor's scans is pulled
         back towards the earlier poses along the direction of travel (the scans' ring and
         column patterns are fixed to the sensor), and LiLi's perturbations are held by the
-        same pull, so they come back and the direction looks constrained. Point-to-plane has
-        no such pull: when it holds the direction (information >= ``min_along_information``)
-        its pose is the measurement (``ok``); when it does not (a featureless tunnel seen
-        through a young map), the direction of travel is the degenerate subspace
-        (``ok`` False, ``degeneracy`` set).
+        same pull, so they come back and the direction looks constrained: on open ground,
+        where the ground's rings are most of the points, the registration lags metres behind
+        while LiLi flags only the yaw the few poles leave free. Point-to-plane has no such
+        pull: when it holds the direction (information >= ``min_along_information``) its pose
+        is the measurement (``ok``); when it does not (a featureless tunnel seen through a
+        young map, open ground between distant poles), the direction joins the degenerate
+        subspace (``ok`` False, ``degeneracy`` set).
         """
         cfg = self.config.plane_refinement
         if not (cfg.enabled and cfg.along_track):
@@ -475,15 +530,26 @@ class OdometryPipeline:
         n = float(np.linalg.norm(travel))
         if n < cfg.min_travel_m:
             return None
-        direction = np.concatenate([travel / n, np.zeros(3)])[None, :]  # scaled = plain
-        refined = refine_in_subspace(points, self._matcher.reference, pose, direction, 1.0, cfg)
+        direction = np.concatenate([travel / n, np.zeros(3)])  # scaled = plain (no rotation)
+        B = degeneracy.basis_scaled
+        if len(B):
+            direction = direction - B.T @ (B @ direction)
+            left = float(np.linalg.norm(direction))
+            if left < cfg.min_along_share:
+                return None
+            direction = direction / left
+        direction = direction[None, :]
+        length = degeneracy.characteristic_length
+        refined = refine_in_subspace(points, self._matcher.reference, pose, direction, length,
+                                     cfg)
         if refined.ok and refined.information[0, 0] >= cfg.min_along_information:
             self.counters["along_track_refined"] += 1
             return _AlongTrack(True, refined.pose, None)
         self.counters["along_track_degenerate"] += 1
         details = {**degeneracy.details, "along_track": True}
-        return _AlongTrack(False, pose, replace(degeneracy, basis_scaled=direction,
-                                                 details=details))
+        return _AlongTrack(False, pose, replace(degeneracy,
+                                                basis_scaled=np.vstack([B, direction]),
+                                                details=details))
 
     def _clear_held_directions(self, degeneracy: DegeneracyResult, refined
                                ) -> tuple[DegeneracyResult, np.ndarray]:

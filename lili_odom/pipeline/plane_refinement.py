@@ -68,13 +68,21 @@ class PlaneRefinementConfig:
         max_step: largest Gauss-Newton step in the subspace [m, scaled]; default 0.3.
         debias: subtract the expected contribution of the plane fits' normal noise from the
             information (``_debiased``); default True.
-        along_track: on a scan the detector found constrained, refine the registration along
-            its direction of travel (the predicted translation since the previous scan): with
+        along_track: refine the registration along its direction of travel (the predicted
+            translation since the previous scan, outside the detected subspace): with
             at least ``min_along_information`` the refined pose is the LiDAR measurement,
             else the direction of travel is taken as degenerate
             (:meth:`lili_odom.pipeline.odometry.OdometryPipeline._along_track`). Default True.
         min_travel_m: predicted travel since the previous scan below which there is no
             along-track refinement [m]; default 0.01.
+        min_along_share: on a degenerate scan, the along-track refinement covers the part of
+            the direction of travel outside the detected subspace when that part's norm is at
+            least this (unit direction, scaled twists); default 0.5.
+        weak_information: directions outside the detected subspace along which the
+            registration's point-to-plane information (debiased, scaled twists) is below this
+            [1/m^2] join the subspace
+            (:meth:`lili_odom.pipeline.odometry.OdometryPipeline._weak_directions`); default
+            100 (a 10 cm sigma); 0 = never.
         min_along_information: information [1/m^2] along the direction of travel from which
             the along-track refinement counts as holding it (default 100: a 10 cm sigma).
         clear_information: a detected direction along which the refinement's information is
@@ -97,6 +105,8 @@ class PlaneRefinementConfig:
     debias: bool = True
     along_track: bool = True
     min_travel_m: float = 0.01
+    min_along_share: float = 0.5
+    weak_information: float = 100.0
     min_along_information: float = 100.0
     clear_information: float = 2500.0
 
@@ -119,6 +129,8 @@ class PlaneRefinementConfig:
                     lo_open=True)
         check_range(prefix + "max_step", self.max_step, 0.0, 100.0, lo_open=True, unit="m")
         check_range(prefix + "min_travel_m", self.min_travel_m, 0.0, 100.0, unit="m")
+        check_range(prefix + "min_along_share", self.min_along_share, 0.0, 1.0)
+        check_range(prefix + "weak_information", self.weak_information, 0.0, 1e12)
         check_range(prefix + "min_along_information", self.min_along_information, 0.0, 1e12)
         check_range(prefix + "clear_information", self.clear_information, 0.0, 1e12)
 
