@@ -479,10 +479,15 @@ class OdometryPipeline:
         last scans left them). The debiased point-to-plane information of the registration
         (:func:`lili_odom.pipeline.plane_refinement.refine_in_subspace` over all six scaled
         twists, no step) tells such directions: the ground's normals say nothing about
-        them. Directions it holds are left to LiLi.
+        them. Directions it holds are left to LiLi. While the map is young (the first
+        ``detection_schedule.hold_warmup_m``), when the pull of its few scans is strongest,
+        the bar is ``weak_information_young``.
         """
         cfg = self.config.plane_refinement
-        if not (cfg.enabled and cfg.weak_information > 0):
+        limit = cfg.weak_information
+        if self._schedule.map_young:
+            limit = max(limit, cfg.weak_information_young)
+        if not (cfg.enabled and limit > 0):
             return None
         B = degeneracy.basis_scaled
         if B.shape[0] >= 6:
@@ -495,7 +500,7 @@ class OdometryPipeline:
         _, _, vt = np.linalg.svd(B, full_matrices=True) if len(B) else (None, None, np.eye(6))
         C = vt[B.shape[0]:]  # orthonormal complement of the subspace
         w, V = np.linalg.eigh(C @ full.information @ C.T)
-        weak = w < cfg.weak_information
+        weak = w < limit
         if not weak.any():
             return None
         self.counters["weak_directions"] += int(weak.sum())
