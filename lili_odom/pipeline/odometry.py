@@ -12,7 +12,10 @@ measured offline is what runs on the robot. Per scan (``process_scan``):
    subspace of that registration, reusing the ICP optimum, unless a detection of the last
    scans nearby can be carried over (:mod:`lili_odom.pipeline.detection_schedule`);
 5. on a degenerate scan the registration is held at the wheels' prediction along the subspace
-   (solution remapping, :mod:`lili_odom.pipeline.remap`) and then refined inside the subspace
+   (solution remapping, :mod:`lili_odom.pipeline.remap`); directions outside the subspace
+   that point-to-plane barely holds join it, and the registration is checked by
+   point-to-plane along the direction of travel left outside it (point-to-point ICP against a
+   young or sparse map lags along it); the registration is then refined inside the subspace
    by point-to-plane Gauss-Newton, which measures what the LiDAR still knows there
    (:mod:`lili_odom.pipeline.plane_refinement`);
 6. iSAM2 fuses IMU preintegration, the LiDAR registration with the degenerate directions
@@ -372,7 +375,8 @@ class OdometryPipeline:
             weak = self._weak_directions(map_points, measured, degeneracy)
             if weak is not None:
                 degeneracy = weak
-                measured = self._remap(source, reg.pose, guess, t_ref, degeneracy)
+                if self._remaps(degeneracy):
+                    measured = self._remap(source, reg.pose, guess, t_ref, degeneracy)
             along = self._along_track(map_points, measured, guess, degeneracy)
             if along is not None and along.ok:
                 measured = along.pose
@@ -447,6 +451,7 @@ class OdometryPipeline:
         return out
 
     def _remaps(self, degeneracy: DegeneracyResult | None) -> bool:
+        """Solution remapping applies: a degenerate detection and ``remap_iterations`` > 0."""
         return bool(self.config.remap_iterations and degeneracy is not None and degeneracy.ok
                     and degeneracy.degenerate)
 
@@ -497,14 +502,13 @@ class OdometryPipeline:
                                   replace(cfg, iterations=0))
         if not full.ok:
             return None
-        _, _, vt = np.linalg.svd(B, full_matrices=True) if len(B) else (None, None, np.eye(6))
-        C = vt[B.shape[0]:]  # orthonormal complement of the subspace
+        C = np.linalg.svd(B, full_matrices=True)[2][len(B):] if len(B) else np.eye(6)
         w, V = np.linalg.eigh(C @ full.information @ C.T)
         weak = w < limit
         if not weak.any():
             return None
         self.counters["weak_directions"] += int(weak.sum())
-        rows = (V[:, weak].T @ C)
+        rows = V[:, weak].T @ C  # orthonormal, orthogonal to the subspace
         details = {**degeneracy.details, "weak": int(weak.sum())}
         return replace(degeneracy, basis_scaled=np.vstack([B, rows]), details=details)
 
