@@ -160,35 +160,7 @@ def test_weak_directions_add_what_point_to_plane_does_not_hold():
     assert held._weak_directions(scan_at(boxed, 20.0), pose_at(20.0), none) is None
     off = _pipeline_over(tube, 99.9)
     off.config.plane_refinement.weak_information = 0.0
-    assert off._schedule.map_young  # the young map's bar still applies
-    assert off._weak_directions(scan_at(tube, 100.0), pose_at(100.0), none) is not None
-    off.config.plane_refinement.weak_information_young = 0.0
     assert off._weak_directions(scan_at(tube, 100.0), pose_at(100.0), none) is None
-
-
-def test_the_young_maps_bar_is_higher():
-    """A direction held to about 5 cm (information 400) is weak while the map is young (bar
-    1000) and not once the sensor has travelled ``hold_warmup_m`` (bar 100)."""
-    from lili_odom.degeneracy.result import DegeneracyResult
-    from lili_odom.pipeline.detection_schedule import DetectionSchedule
-
-    boxed = corridor(40.0, end_walls=True)
-    pipeline = _pipeline_over(boxed, 19.9)
-    scan, pose = scan_at(boxed, 20.0), pose_at(20.0)
-    none = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0)
-    full = refine_in_subspace(scan, pipeline._matcher.reference, pose, np.eye(6), 10.0,
-                              PlaneRefinementConfig(iterations=0))
-    smallest = float(np.linalg.eigvalsh(full.information).min())
-    cfg = pipeline.config.plane_refinement
-    cfg.weak_information, cfg.weak_information_young = 0.5 * smallest, 2.0 * smallest
-    young = pipeline._weak_directions(scan, pose, none)
-    assert young is not None and young.dimension >= 1
-    schedule = DetectionSchedule(pipeline.config.detection_schedule)
-    for x in np.linspace(0.0, 1.2 * schedule.config.hold_warmup_m, 30):
-        schedule.hold(none, pose_at(x))
-    assert not schedule.map_young and schedule.travelled > schedule.config.hold_warmup_m
-    pipeline._schedule = schedule
-    assert pipeline._weak_directions(scan, pose, none) is None
 
 
 def test_along_track_covers_the_travel_outside_a_detected_subspace():

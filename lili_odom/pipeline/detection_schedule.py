@@ -117,16 +117,6 @@ class DetectionSchedule:
             self._travelled = 0.0
             self._last_pose = None
 
-    @property
-    def travelled(self) -> float:
-        """Path length [m] of the registrations since the local map was (re)started."""
-        return self._travelled
-
-    @property
-    def map_young(self) -> bool:
-        """The sensor has not yet travelled ``hold_warmup_m`` since the map (re)started."""
-        return self._travelled < self.config.hold_warmup_m
-
     def reusable(self, pose: np.ndarray) -> DegeneracyResult | None:
         """The last detection carried over to ``pose``, or None when the detector must run."""
         cfg, last = self.config, self._last

@@ -484,14 +484,10 @@ class OdometryPipeline:
         last scans left them). The debiased point-to-plane information of the registration
         (:func:`lili_odom.pipeline.plane_refinement.refine_in_subspace` over all six scaled
         twists, no step) tells such directions: the ground's normals say nothing about
-        them. Directions it holds are left to LiLi. While the map is young (the first
-        ``detection_schedule.hold_warmup_m``), when the pull of its few scans is strongest,
-        the bar is ``weak_information_young``.
+        them. Directions it holds are left to LiLi.
         """
         cfg = self.config.plane_refinement
         limit = cfg.weak_information
-        if self._schedule.map_young:
-            limit = max(limit, cfg.weak_information_young)
         if not (cfg.enabled and limit > 0):
             return None
         B = degeneracy.basis_scaled

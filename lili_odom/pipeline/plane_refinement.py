@@ -82,10 +82,7 @@ class PlaneRefinementConfig:
             registration's point-to-plane information (debiased, scaled twists) is below this
             [1/m^2] join the subspace
             (:meth:`lili_odom.pipeline.odometry.OdometryPipeline._weak_directions`); default
-            100 (a 10 cm sigma); 0 = never.
-        weak_information_young: the same bar [1/m^2] while the local map is young (the
-            first ``detection_schedule.hold_warmup_m`` of travel after a (re)start); the
-            larger of the two applies. Default 1000 (a 3 cm sigma).
+            1000 (a 3 cm sigma); 0 = never.
         min_along_information: information [1/m^2] along the direction of travel from which
             the along-track refinement counts as holding it (default 100: a 10 cm sigma).
         clear_information: a detected direction along which the refinement's information is
@@ -109,8 +106,7 @@ class PlaneRefinementConfig:
     along_track: bool = True
     min_travel_m: float = 0.01
     min_along_share: float = 0.5
-    weak_information: float = 100.0
-    weak_information_young: float = 1000.0
+    weak_information: float = 1000.0
     min_along_information: float = 100.0
     clear_information: float = 2500.0
 
@@ -135,7 +131,6 @@ class PlaneRefinementConfig:
         check_range(prefix + "min_travel_m", self.min_travel_m, 0.0, 100.0, unit="m")
         check_range(prefix + "min_along_share", self.min_along_share, 0.0, 1.0)
         check_range(prefix + "weak_information", self.weak_information, 0.0, 1e12)
-        check_range(prefix + "weak_information_young", self.weak_information_young, 0.0, 1e12)
         check_range(prefix + "min_along_information", self.min_along_information, 0.0, 1e12)
         check_range(prefix + "clear_information", self.clear_information, 0.0, 1e12)
 
