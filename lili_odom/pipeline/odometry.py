@@ -41,7 +41,9 @@ from lili_odom.degeneracy.lili import LiliConfig, LiliDetector
 from lili_odom.degeneracy.result import DegeneracyResult
 from lili_odom.errors import ThrottledWarnings
 from lili_odom.fusion.config import FusionConfig
+from lili_odom.degeneracy.subspace import orthonormal_rows
 from lili_odom.fusion.estimator import FusionEstimator, SubspaceMeasurement
+from lili_odom.fusion.subspace import scaled_lidar_to_base
 from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionScheduleConfig
 from lili_odom.pipeline.plane_refinement import PlaneRefinementConfig, refine_in_subspace
 from lili_odom.pipeline.remap import constrained_registration
@@ -475,31 +477,41 @@ class OdometryPipeline:
 
     def _weak_directions(self, points: np.ndarray, pose: np.ndarray,
                          degeneracy: DegeneracyResult) -> DegeneracyResult | None:
-        """The detection with the directions outside its subspace that point-to-plane barely
-        holds added (``plane_refinement.weak_information``), or None when there are none.
+        """The detection with the directions of the robot's planar motion that point-to-plane
+        barely holds added (``plane_refinement.weak_information``), or None when there are
+        none.
 
         LiLi asks whether point-to-point re-registrations come back; against a young or sparse
         map a direction can come back to a point-to-point optimum that the scene does not fix
         (open ground: the ground's rings, fixed to the sensor, hold x, y and yaw wherever the
         last scans left them). The debiased point-to-plane information of the registration
-        (:func:`lili_odom.pipeline.plane_refinement.refine_in_subspace` over all six scaled
-        twists, no step) tells such directions: the ground's normals say nothing about
-        them. Directions it holds are left to LiLi.
+        (:func:`lili_odom.pipeline.plane_refinement.refine_in_subspace`, no step) tells such
+        directions: the ground's normals say nothing about them. Only base_link's forward,
+        lateral and yaw motion outside the detected subspace is checked: the wheels and the
+        IMU carry those well, while roll, pitch and height, which a tunnel's walls may hold
+        only weakly, are not the wheels' to carry. Directions it holds are left to LiLi.
         """
         cfg = self.config.plane_refinement
         limit = cfg.weak_information
         if not (cfg.enabled and limit > 0):
             return None
         B = degeneracy.basis_scaled
-        if B.shape[0] >= 6:
-            return None
         length = degeneracy.characteristic_length
-        full = refine_in_subspace(points, self._matcher.reference, pose, np.eye(6), length,
+        # the ground robot's own motion (forward, lateral, yaw of base_link) as scaled LiDAR
+        # twists, without what the subspace already holds
+        planar = np.linalg.solve(scaled_lidar_to_base(self.T_base_lidar, length),
+                                 np.eye(6)[:, [0, 1, 5]]).T
+        if len(B):
+            planar = planar - planar @ B.T @ B
+        C = orthonormal_rows(planar, rtol=1e-3)
+        if not len(C):
+            return None
+        full = refine_in_subspace(points, self._matcher.reference, pose, C, length,
                                   replace(cfg, iterations=0))
         if not full.ok:
             return None
-        C = np.linalg.svd(B, full_matrices=True)[2][len(B):] if len(B) else np.eye(6)
-        w, V = np.linalg.eigh(C @ full.information @ C.T)
+        w, V = np.linalg.eigh(full.information)
+        C = full.basis_scaled
         weak = w < limit
         if not weak.any():
             return None
