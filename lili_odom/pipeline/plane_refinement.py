@@ -78,9 +78,9 @@ class PlaneRefinementConfig:
         min_along_share: on a degenerate scan, the along-track refinement covers the part of
             the direction of travel outside the detected subspace when that part's norm is at
             least this (unit direction, scaled twists); default 0.5.
-        weak_information: directions outside the detected subspace along which the
-            registration's point-to-plane information (debiased, scaled twists) is below this
-            [1/m^2] join the subspace
+        weak_information: directions of base_link's forward, lateral and yaw motion outside
+            the detected subspace along which the registration's point-to-plane information
+            (debiased, scaled twists) is below this [1/m^2] join the subspace
             (:meth:`lili_odom.pipeline.odometry.OdometryPipeline._weak_directions`); default
             1000 (a 3 cm sigma); 0 = never.
         min_along_information: information [1/m^2] along the direction of travel from which
