@@ -146,21 +146,24 @@ def test_weak_directions_add_what_point_to_plane_does_not_hold():
     from lili_odom.degeneracy.result import DegeneracyResult
 
     tube = corridor(200.0, end_walls=False)
+    here = pose_at(100.0)
     pipeline = _pipeline_over(tube, 99.9)
     none = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0)
-    weak = pipeline._weak_directions(scan_at(tube, 100.0), pose_at(100.0), none)
+    weak = pipeline._weak_directions(scan_at(tube, 100.0), here, here, none)
     assert weak is not None and weak.dimension == 1 and weak.details["weak"] == 1
     assert abs(weak.basis_scaled[0, 0]) > 0.99  # the tube's axis
     # a direction already detected is not added again
     axis = DegeneracyResult("lili", np.eye(4), AXIS_X, 10.0)
-    assert pipeline._weak_directions(scan_at(tube, 100.0), pose_at(100.0), axis) is None
+    assert pipeline._weak_directions(scan_at(tube, 100.0), here, here, axis) is None
 
     boxed = corridor(40.0, end_walls=True)
     held = _pipeline_over(boxed, 19.9)
-    assert held._weak_directions(scan_at(boxed, 20.0), pose_at(20.0), none) is None
+    assert held._weak_directions(scan_at(boxed, 20.0), pose_at(20.0), pose_at(20.0), none) is None
+    still = _pipeline_over(tube, 100.0)  # no travel since the previous scan: no check
+    assert still._weak_directions(scan_at(tube, 100.0), here, here, none) is None
     off = _pipeline_over(tube, 99.9)
     off.config.plane_refinement.weak_information = 0.0
-    assert off._weak_directions(scan_at(tube, 100.0), pose_at(100.0), none) is None
+    assert off._weak_directions(scan_at(tube, 100.0), here, here, none) is None
 
 
 def test_along_track_covers_the_travel_outside_a_detected_subspace():

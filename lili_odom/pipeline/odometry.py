@@ -374,7 +374,7 @@ class OdometryPipeline:
 
         t0 = time.perf_counter()
         if degeneracy is not None and degeneracy.ok and self._last_output is not None:
-            weak = self._weak_directions(map_points, measured, degeneracy)
+            weak = self._weak_directions(map_points, measured, guess, degeneracy)
             if weak is not None:
                 degeneracy = weak
                 if self._remaps(degeneracy):
@@ -475,7 +475,7 @@ class OdometryPipeline:
             self.counters["remap_failures"] += 1
         return remapped.pose
 
-    def _weak_directions(self, points: np.ndarray, pose: np.ndarray,
+    def _weak_directions(self, points: np.ndarray, pose: np.ndarray, guess: np.ndarray,
                          degeneracy: DegeneracyResult) -> DegeneracyResult | None:
         """The detection with the directions of the robot's planar motion that point-to-plane
         barely holds added (``plane_refinement.weak_information``), or None when there are
@@ -489,11 +489,17 @@ class OdometryPipeline:
         directions: the ground's normals say nothing about them. Only base_link's forward,
         lateral and yaw motion outside the detected subspace is checked: the wheels and the
         IMU carry those well, while roll, pitch and height, which a tunnel's walls may hold
-        only weakly, are not the wheels' to carry. Directions it holds are left to LiLi.
+        only weakly, are not the wheels' to carry. Directions it holds are left to LiLi. Like
+        the along-track check it applies only while the sensor moves (predicted travel since
+        the previous scan of at least ``min_travel_m``): the pull comes from the motion
+        against the map's sampling pattern.
         """
         cfg = self.config.plane_refinement
         limit = cfg.weak_information
         if not (cfg.enabled and limit > 0):
+            return None
+        previous = self._last_output.pose @ self.T_base_lidar
+        if float(np.linalg.norm(guess[:3, 3] - previous[:3, 3])) < cfg.min_travel_m:
             return None
         B = degeneracy.basis_scaled
         length = degeneracy.characteristic_length
