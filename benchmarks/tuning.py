@@ -25,10 +25,6 @@ from pathlib import Path
 from benchmarks._common import ROOT, RESULTS, git
 
 
-def _label(config: str) -> str:
-    return "default" if config == "default" else Path(config).stem
-
-
 def _rows_by_key(doc: dict, method: str) -> dict[tuple[str, int], dict]:
     return {(r["scenario"], r["seed"]): r for r in doc["rows"] if r["method"] == method}
 
@@ -97,6 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
 
+    from lili_odom.evaluation.comparison import run_label
     from lili_odom.suite.backends import LocalBackend
     from lili_odom.suite.runner import SuiteRequest, run_suite
     from lili_odom.suite.scenario import load_scenarios
@@ -114,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     for config in args.configs:
         if config != "default" and not (ROOT / config).is_file() and not Path(config).is_file():
             raise SystemExit(f"{prog}: no such configuration file: {config}")
-    labels = [_label(c) for c in args.configs]
+    labels = [run_label(c) for c in args.configs]
     if len(set(labels)) != len(labels):
         raise SystemExit(f"{prog}: two configurations share the name {labels}")
 

@@ -475,6 +475,10 @@ class OdometryPipeline:
             self.counters["remap_failures"] += 1
         return remapped.pose
 
+    def _travel(self, guess: np.ndarray) -> np.ndarray:
+        """Predicted translation [m] of the LiDAR since the previous output (odometry frame)."""
+        return guess[:3, 3] - (self._last_output.pose @ self.T_base_lidar)[:3, 3]
+
     def _weak_directions(self, points: np.ndarray, pose: np.ndarray, guess: np.ndarray,
                          degeneracy: DegeneracyResult) -> DegeneracyResult | None:
         """The detection with the directions of the robot's planar motion that point-to-plane
@@ -498,8 +502,7 @@ class OdometryPipeline:
         limit = cfg.weak_information
         if not (cfg.enabled and limit > 0):
             return None
-        previous = self._last_output.pose @ self.T_base_lidar
-        if float(np.linalg.norm(guess[:3, 3] - previous[:3, 3])) < cfg.min_travel_m:
+        if float(np.linalg.norm(self._travel(guess))) < cfg.min_travel_m:
             return None
         B = degeneracy.basis_scaled
         length = degeneracy.characteristic_length
@@ -548,8 +551,7 @@ class OdometryPipeline:
         cfg = self.config.plane_refinement
         if not (cfg.enabled and cfg.along_track):
             return None
-        previous = self._last_output.pose @ self.T_base_lidar
-        travel = pose[:3, :3].T @ (guess[:3, 3] - previous[:3, 3])
+        travel = pose[:3, :3].T @ self._travel(guess)
         n = float(np.linalg.norm(travel))
         if n < cfg.min_travel_m:
             return None
