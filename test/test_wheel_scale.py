@@ -70,18 +70,42 @@ def test_a_wheel_slip_rejects_its_segment_and_a_wrong_estimate_is_restarted():
 
 def test_a_slip_before_the_estimate_exists_does_not_carry_its_segment():
     """Five segments, the first with 20 cm of wheel slip (3.3 %) before there is an estimate
-    to gate it: the plain mean comes out 0.7 % long, the Huber estimate about 0.4 %."""
-    def run(robust_ratio: float) -> float:
-        est = WheelScaleEstimator(WheelScaleConfig(robust_ratio=robust_ratio))
+    to gate it: the plain mean comes out 0.7 % long, the Huber estimate about 0.4 %, and with
+    the slip's piece cut out of its segment the scale is right."""
+    def run(robust_ratio: float, slip_piece_ratio: float) -> WheelScaleEstimator:
+        est = WheelScaleEstimator(WheelScaleConfig(robust_ratio=robust_ratio,
+                                                   slip_piece_ratio=slip_piece_ratio))
         drive(est, 60, 0.1, 0.1)  # 1 s to a steady start, then the first segment
         drive(est, 10, 0.12, 0.1)  # one second of spinning wheels
         drive(est, 40, 0.1, 0.1)
         drive(est, 200, 0.1, 0.1)
         assert est.used == 5 and est.rejected == 0
-        return est.scale
+        return est
 
-    assert run(0.0) == pytest.approx(1.0072, abs=2e-4)
-    assert abs(run(0.015) - 1.0) < 0.0045
+    assert run(0.0, 0.0).scale == pytest.approx(1.0072, abs=2e-4)
+    assert abs(run(0.015, 0.0).scale - 1.0) < 0.0045
+    est = run(0.015, 0.08)
+    assert est.slip_pieces >= 1 and abs(est.scale - 1.0) < 1e-3
+
+
+def test_a_slip_in_the_only_segments_before_a_tunnel_is_cut_out():
+    """Two segments before the chain breaks for good, the first with a 1 s, 35 % slip: the
+    scale established from them is the true 1.02, not their mean (about 1.05)."""
+    est = WheelScaleEstimator()
+    drive(est, 15, 0.102, 0.1)  # steady start
+    drive(est, 20, 0.102, 0.1)
+    drive(est, 10, 0.102 * 1.35, 0.1)
+    drive(est, 70, 0.102, 0.1)
+    est.interrupt()  # into the tunnel
+    assert est.used == 2 and est.slip_pieces >= 1
+    assert est.scale == pytest.approx(1.02, abs=2e-3)
+    plain = WheelScaleEstimator(WheelScaleConfig(slip_piece_ratio=0.0))
+    drive(plain, 15, 0.102, 0.1)
+    drive(plain, 20, 0.102, 0.1)
+    drive(plain, 10, 0.102 * 1.35, 0.1)
+    drive(plain, 70, 0.102, 0.1)
+    plain.interrupt()
+    assert plain.scale > 1.04
 
 
 def test_honest_segments_scattered_by_registration_error_average_as_before():

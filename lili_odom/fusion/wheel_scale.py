@@ -31,6 +31,14 @@ placed at steady speed (the last ``steady_scans`` wheel increments within
 ``steady_ratio``), because a registration that loses ground while the robot accelerates from
 rest would otherwise put its shortfall into the first segment.
 
+Inside a segment, a slip (the wheels over-read by tens of percent for a second) is cut out
+before the segment is used: the segment is split into pieces of ``slip_piece_m`` of wheel
+travel, each piece's ratio is compared with the median piece's, and pieces off by more than
+``slip_piece_ratio`` lose both their wheel and their LiDAR distance. Over a metre the
+registrations' endpoint errors move a piece's ratio by a few percent, a slip by 10-35 %. Without
+this, the first segments (before any estimate exists to gate them) carry a slip straight into
+the scale: one 1 s slip in the only segment seen before a tunnel sets the scale 5 % off.
+
 Segments that disagree with the current estimate by more than the slip gate are not used
 (wheels spinning, bad registration); after ``max_rejections`` rejected segments in a row the
 estimate itself is taken to be wrong and restarted. Each segment counts with its LiDAR
@@ -80,6 +88,9 @@ class WheelScaleConfig:
         max_rejections: that many rejected segments in a row restart the estimate.
         robust_ratio: Huber threshold on a segment's ratio's deviation from the estimate
             (dimensionless; 0.015 = 1.5 %); 0 = plain distance-weighted mean.
+        slip_piece_m: wheel travel of the pieces a segment is split into to find slips [m].
+        slip_piece_ratio: a piece whose wheel/LiDAR ratio differs from the segment's median
+            piece ratio by more than this fraction is cut out of the segment (0 = off).
         max_lidar_sigma: an increment whose registration has a degenerate subspace is still
             chained when the LiDAR (the kept information plus its own information inside the
             subspace) holds the wheels' direction of travel to this 1-sigma [m]; 0 = only
@@ -99,6 +110,8 @@ class WheelScaleConfig:
     slip_gate_ratio: float = 0.03
     max_rejections: int = 3
     robust_ratio: float = 0.015
+    slip_piece_m: float = 1.0
+    slip_piece_ratio: float = 0.08
     max_lidar_sigma: float = 0.03
 
     def validate(self, prefix: str = "wheel_scale.") -> None:
@@ -117,6 +130,9 @@ class WheelScaleConfig:
         check_range(prefix + "slip_gate_ratio", self.slip_gate_ratio, 0.0, 10.0)
         check_range(prefix + "max_rejections", self.max_rejections, 1, 1000)
         check_range(prefix + "robust_ratio", self.robust_ratio, 0.0, 1.0)
+        check_range(prefix + "slip_piece_m", self.slip_piece_m, 0.0, 1e3, lo_open=True,
+                    unit="m")
+        check_range(prefix + "slip_piece_ratio", self.slip_piece_ratio, 0.0, 10.0)
         check_range(prefix + "max_lidar_sigma", self.max_lidar_sigma, 0.0, 10.0, unit="m")
 
 
@@ -125,9 +141,10 @@ class _Segment:
 
     def __init__(self) -> None:
         self.lidar = np.eye(4)        # LiDAR motion since the start (start frame)
-        self.wheel = np.zeros(3)      # wheel translations, rotated into the start frame [m]
         self.path = 0.0               # wheel path length [m]
-        self.end: tuple[np.ndarray, np.ndarray, float] | None = None  # last steady end
+        self.end: tuple[float, int] | None = None  # last steady end: path, increments
+        # per increment: wheel translation (start frame) [m], LiDAR position after it [m]
+        self.steps: list[tuple[np.ndarray, np.ndarray]] = []
 
 
 @dataclass(frozen=True)
@@ -153,6 +170,7 @@ class WheelScaleEstimator:
         self.used = 0        # segments used
         self.rejected = 0    # segments rejected by the slip gate
         self.restarts = 0    # estimates restarted after repeated rejections
+        self.slip_pieces = 0  # pieces cut out of segments as slips
         self._segment: _Segment | None = None
         self._steps: deque[float] = deque(maxlen=self.config.steady_scans)  # wheel steps [m]
         self._rejections_in_row = 0
@@ -185,11 +203,12 @@ class WheelScaleEstimator:
             if steady:
                 self._segment = _Segment()
             return False
-        seg.wheel = seg.wheel + seg.lidar[:3, :3] @ W[:3, 3]
+        w_start = seg.lidar[:3, :3] @ W[:3, 3]
         seg.lidar = seg.lidar @ L
         seg.path += step
+        seg.steps.append((w_start, seg.lidar[:3, 3].copy()))
         if steady:
-            seg.end = (seg.lidar.copy(), seg.wheel.copy(), seg.path)
+            seg.end = (seg.path, len(seg.steps))
             if seg.path >= self.config.segment_m:
                 self._close(seg)
                 self._segment = _Segment()  # contiguous: the next segment starts here
@@ -215,11 +234,12 @@ class WheelScaleEstimator:
         cfg = self.config
         if seg.end is None:
             return
-        lidar, wheel, path = seg.end
+        path, steps = seg.end
+        lidar_t, wheel = self._without_slips(seg.steps[:steps])
         w = float(np.linalg.norm(wheel))
         if path < cfg.min_segment_m or w < 0.5 * path:  # too short, or turned back on itself
             return
-        along = float(lidar[:3, 3] @ (wheel / w))  # LiDAR distance along the wheels' chord
+        along = float(lidar_t @ (wheel / w))  # LiDAR distance along the wheels' chord
         ref = self.scale if self.established else None
         if ref is None:
             ok = cfg.min_scale * along <= w <= cfg.max_scale * along
@@ -243,6 +263,40 @@ class WheelScaleEstimator:
         self.used += 1
         self._estimate = self._robust_ratio()
         self._lidar_m = float(sum(self._fade(s) * s.lidar for s in self.segments))
+
+    def _without_slips(self, steps: list[tuple[np.ndarray, np.ndarray]]
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """LiDAR displacement and wheel vector of a segment's increments [m], start frame,
+        without the pieces whose ratio marks a slip (see the module docstring)."""
+        if not steps:
+            return np.zeros(3), np.zeros(3)
+        wheels = np.array([w for w, _ in steps])
+        ends = np.array([p for _, p in steps])
+        lidar, wheel = ends[-1].copy(), wheels.sum(axis=0)
+        cfg = self.config
+        if cfg.slip_piece_ratio <= 0.0:
+            return lidar, wheel
+        path = np.cumsum(np.linalg.norm(wheels, axis=1))
+        cut = np.searchsorted(path, np.arange(cfg.slip_piece_m, path[-1], cfg.slip_piece_m),
+                              side="left")
+        bounds = np.unique(np.r_[0, cut + 1, len(steps)])
+        if len(bounds) > 2 and path[-1] - path[bounds[-2] - 1] < 0.5 * cfg.slip_piece_m:
+            bounds = np.delete(bounds, -2)  # a short last piece joins the one before
+        pieces = []
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            pw = wheels[a:b].sum(axis=0)
+            pl = ends[b - 1] - (ends[a - 1] if a > 0 else 0.0)
+            n = float(np.linalg.norm(pw))
+            along = float(pl @ pw) / n if n > 0 else 0.0
+            pieces.append((pw, pl, n / along if along > 0.5 * n else np.inf))
+        if len(pieces) < 3:
+            return lidar, wheel
+        median = float(np.median([r for _, _, r in pieces]))
+        for pw, pl, r in pieces:
+            if not abs(r / median - 1.0) <= cfg.slip_piece_ratio:
+                lidar, wheel = lidar - pl, wheel - pw
+                self.slip_pieces += 1
+        return lidar, wheel
 
     def _fade(self, seg: ClosedSegment) -> float:
         return math.exp(-(self.travel - seg.travel) / self.config.window_m)
