@@ -4,7 +4,8 @@ import pytest
 
 from lili_odom import geometry
 from lili_odom.degeneracy.reference import ReferenceMap
-from lili_odom.pipeline.plane_refinement import (PlaneRefinementConfig, plane_jacobians,
+from lili_odom.pipeline.plane_refinement import (PlaneFitCache, PlaneRefinementConfig,
+                                                 fit_planes, plane_jacobians,
                                                  refine_in_subspace)
 
 AXIS_X = np.array([[1.0, 0, 0, 0, 0, 0]])  # scaled twist: translation along the corridor
@@ -139,6 +140,11 @@ def _pipeline_over(world: np.ndarray, previous_x: float):
     return pipeline
 
 
+def planes(pipeline, scan: np.ndarray) -> PlaneFitCache:
+    """The plane fits of ``scan`` against ``pipeline``'s local map, as one scan shares them."""
+    return PlaneFitCache(scan, pipeline._matcher.reference, pipeline.config.plane_refinement)
+
+
 YAW = np.array([[0, 0, 0, 0, 0, 1.0]])
 
 
@@ -149,21 +155,24 @@ def test_weak_directions_add_what_point_to_plane_does_not_hold():
     here = pose_at(100.0)
     pipeline = _pipeline_over(tube, 99.9)
     none = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0)
-    weak = pipeline._weak_directions(scan_at(tube, 100.0), here, here, none)
+    scan = planes(pipeline, scan_at(tube, 100.0))
+    weak = pipeline._weak_directions(scan, here, here, none)
     assert weak is not None and weak.dimension == 1 and weak.details["weak"] == 1
     assert abs(weak.basis_scaled[0, 0]) > 0.99  # the tube's axis
     # a direction already detected is not added again
     axis = DegeneracyResult("lili", np.eye(4), AXIS_X, 10.0)
-    assert pipeline._weak_directions(scan_at(tube, 100.0), here, here, axis) is None
+    assert pipeline._weak_directions(scan, here, here, axis) is None
+    assert scan.queries == 1  # both checks at the same pose: one k-d tree query
 
     boxed = corridor(40.0, end_walls=True)
     held = _pipeline_over(boxed, 19.9)
-    assert held._weak_directions(scan_at(boxed, 20.0), pose_at(20.0), pose_at(20.0), none) is None
+    at20 = pose_at(20.0)
+    assert held._weak_directions(planes(held, scan_at(boxed, 20.0)), at20, at20, none) is None
     still = _pipeline_over(tube, 100.0)  # no travel since the previous scan: no check
-    assert still._weak_directions(scan_at(tube, 100.0), here, here, none) is None
+    assert still._weak_directions(planes(still, scan_at(tube, 100.0)), here, here, none) is None
     off = _pipeline_over(tube, 99.9)
     off.config.plane_refinement.weak_information = 0.0
-    assert off._weak_directions(scan_at(tube, 100.0), here, here, none) is None
+    assert off._weak_directions(planes(off, scan_at(tube, 100.0)), here, here, none) is None
 
 
 def test_along_track_covers_the_travel_outside_a_detected_subspace():
@@ -174,17 +183,38 @@ def test_along_track_covers_the_travel_outside_a_detected_subspace():
     boxed = corridor(40.0, end_walls=True)
     pipeline = _pipeline_over(boxed, 24.9)
     yaw = DegeneracyResult("lili", np.eye(4), YAW, 10.0)
-    along = pipeline._along_track(scan_at(boxed, 25.0), pose_at(24.8), pose_at(25.0), yaw)
+    scan = planes(pipeline, scan_at(boxed, 25.0))
+    along = pipeline._along_track(scan, pose_at(24.8), pose_at(25.0), yaw)
     assert along is not None and along.ok
     assert abs(along.pose[0, 3] - 25.0) < 0.03
     # in a tube the travel joins the detected subspace
     tube = corridor(200.0, end_walls=False)
     pipeline = _pipeline_over(tube, 99.9)
-    along = pipeline._along_track(scan_at(tube, 100.0), pose_at(100.0), pose_at(100.0), yaw)
+    here = pose_at(100.0)
+    scan = planes(pipeline, scan_at(tube, 100.0))
+    along = pipeline._along_track(scan, here, here, yaw)
     assert along is not None and not along.ok
     assert along.degeneracy.dimension == 2 and along.degeneracy.details["along_track"]
     assert np.allclose(np.abs(along.degeneracy.basis_scaled[1]), AXIS_X[0], atol=1e-9)
     # travel inside the detected subspace: nothing to check
     axis = DegeneracyResult("lili", np.eye(4), AXIS_X, 10.0)
-    assert pipeline._along_track(scan_at(tube, 100.0), pose_at(100.0), pose_at(100.0),
-                                 axis) is None
+    assert pipeline._along_track(scan, here, here, axis) is None
+
+
+def test_plane_fits_are_shared_near_their_pose_and_found_again_farther_away():
+    boxed = corridor(40.0, end_walls=True)
+    ref = ReferenceMap.from_points(boxed, 1.0, 200)
+    scan = scan_at(boxed, 20.0)
+    cache = PlaneFitCache(scan, ref)
+    fits = cache.at(pose_at(20.0))
+    assert fits.valid.sum() > 100 and cache.queries == 1
+    assert cache.at(pose_at(20.03)) is fits and cache.queries == 1
+    assert cache.at(pose_at(20.5)) is not fits and cache.queries == 2
+    # a refinement on shared fits is the one that finds its own planes
+    start = pose_at(20.2)
+    own = refine_in_subspace(scan, ref, start, AXIS_X, 10.0)
+    shared = refine_in_subspace(scan, ref, start, AXIS_X, 10.0,
+                                fits=fit_planes(scan, ref, pose_at(20.2)))
+    np.testing.assert_allclose(shared.pose, own.pose, atol=1e-12)
+    np.testing.assert_allclose(shared.information, own.information, rtol=1e-9)
+    assert abs(own.pose[0, 3] - 20.0) < 0.03

@@ -45,7 +45,8 @@ from lili_odom.degeneracy.subspace import orthonormal_rows
 from lili_odom.fusion.estimator import FusionEstimator, SubspaceMeasurement
 from lili_odom.fusion.subspace import scaled_lidar_to_base
 from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionScheduleConfig
-from lili_odom.pipeline.plane_refinement import PlaneRefinementConfig, refine_in_subspace
+from lili_odom.pipeline.plane_refinement import (PlaneFitCache, PlaneRefinementConfig,
+                                                 refine_in_subspace)
 from lili_odom.pipeline.remap import constrained_registration
 from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig
 from lili_odom.pipeline.types import ImuSample, OdometryOutput, Scan, WheelSample
@@ -373,19 +374,22 @@ class OdometryPipeline:
         timings["remap"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
+        planes = PlaneFitCache(map_points, self._matcher.reference, self.config.plane_refinement)
         if degeneracy is not None and degeneracy.ok and self._last_output is not None:
-            weak = self._weak_directions(map_points, measured, guess, degeneracy)
+            weak = self._weak_directions(planes, measured, guess, degeneracy)
             if weak is not None:
                 degeneracy = weak
                 if self._remaps(degeneracy):
                     measured = self._remap(source, reg.pose, guess, t_ref, degeneracy)
-            along = self._along_track(map_points, measured, guess, degeneracy)
+            along = self._along_track(planes, measured, guess, degeneracy)
             if along is not None and along.ok:
                 measured = along.pose
             elif along is not None:
                 degeneracy = along.degeneracy
                 if self._remaps(degeneracy):
                     measured = self._remap(source, reg.pose, guess, t_ref, degeneracy)
+            if reg.ok:
+                measured = self._refine_constrained(planes, measured, degeneracy)
         timings["along_track"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
@@ -395,7 +399,8 @@ class OdometryPipeline:
                 and degeneracy is not None and degeneracy.ok and degeneracy.degenerate):
             refined = refine_in_subspace(map_points, self._matcher.reference, measured,
                                          degeneracy.basis_scaled,
-                                         degeneracy.characteristic_length, refine)
+                                         degeneracy.characteristic_length, refine,
+                                         fits=planes.at(measured))
             if refined.ok:
                 degeneracy, info = self._clear_held_directions(degeneracy, refined)
                 measured = refined.pose
@@ -405,6 +410,7 @@ class OdometryPipeline:
             else:
                 self.counters["refinement_failures"] += 1
         timings["refine"] = time.perf_counter() - t0
+        self.counters["plane_fits"] += planes.queries
 
         t0 = time.perf_counter()
         if first and reinit_pose is not None:
@@ -479,7 +485,7 @@ class OdometryPipeline:
         """Predicted translation [m] of the LiDAR since the previous output (odometry frame)."""
         return guess[:3, 3] - (self._last_output.pose @ self.T_base_lidar)[:3, 3]
 
-    def _weak_directions(self, points: np.ndarray, pose: np.ndarray, guess: np.ndarray,
+    def _weak_directions(self, planes: PlaneFitCache, pose: np.ndarray, guess: np.ndarray,
                          degeneracy: DegeneracyResult) -> DegeneracyResult | None:
         """The detection with the directions of the robot's planar motion that point-to-plane
         barely holds added (``plane_refinement.weak_information``), or None when there are
@@ -515,8 +521,8 @@ class OdometryPipeline:
         C = orthonormal_rows(planar, rtol=1e-3)
         if not len(C):
             return None
-        full = refine_in_subspace(points, self._matcher.reference, pose, C, length,
-                                  replace(cfg, iterations=0))
+        full = refine_in_subspace(planes.points, planes.reference, pose, C, length,
+                                  replace(cfg, iterations=0), fits=planes.at(pose))
         if not full.ok:
             return None
         w, V = np.linalg.eigh(full.information)
@@ -529,7 +535,7 @@ class OdometryPipeline:
         details = {**degeneracy.details, "weak": int(weak.sum())}
         return replace(degeneracy, basis_scaled=np.vstack([B, rows]), details=details)
 
-    def _along_track(self, points: np.ndarray, pose: np.ndarray, guess: np.ndarray,
+    def _along_track(self, planes: PlaneFitCache, pose: np.ndarray, guess: np.ndarray,
                      degeneracy: DegeneracyResult):
         """Point-to-plane along the direction of travel where the detector found it
         constrained (``plane_refinement.along_track``), or None when it does not apply.
@@ -565,8 +571,8 @@ class OdometryPipeline:
             direction = direction / left
         direction = direction[None, :]
         length = degeneracy.characteristic_length
-        refined = refine_in_subspace(points, self._matcher.reference, pose, direction, length,
-                                     cfg)
+        refined = refine_in_subspace(planes.points, planes.reference, pose, direction, length,
+                                     cfg, fits=planes.at(pose))
         if refined.ok and refined.information[0, 0] >= cfg.min_along_information:
             self.counters["along_track_refined"] += 1
             return _AlongTrack(True, refined.pose, None)
@@ -575,6 +581,26 @@ class OdometryPipeline:
         return _AlongTrack(False, pose, replace(degeneracy,
                                                 basis_scaled=np.vstack([B, direction]),
                                                 details=details))
+
+    def _refine_constrained(self, planes: PlaneFitCache, pose: np.ndarray,
+                            degeneracy: DegeneracyResult) -> np.ndarray:
+        """``pose`` refined by point-to-plane in the directions outside the degenerate
+        subspace (``plane_refinement.refine_constrained``); ``pose`` itself when the planes
+        are too few."""
+        cfg = self.config.plane_refinement
+        if not (cfg.enabled and cfg.refine_constrained):
+            return pose
+        B = degeneracy.basis_scaled
+        C = orthonormal_rows(np.eye(6) - B.T @ B, rtol=1e-3) if len(B) else np.eye(6)
+        if not len(C):
+            return pose
+        refined = refine_in_subspace(planes.points, planes.reference, pose, C,
+                                     degeneracy.characteristic_length, cfg,
+                                     fits=planes.at(pose))
+        if not refined.ok:
+            return pose
+        self.counters["constrained_refined"] += 1
+        return refined.pose
 
     def _clear_held_directions(self, degeneracy: DegeneracyResult, refined
                                ) -> tuple[DegeneracyResult, np.ndarray]:

@@ -43,7 +43,8 @@ from lili_odom import geometry
 from lili_odom.degeneracy.reference import ReferenceMap
 from lili_odom.degeneracy.subspace import orthonormal_rows
 
-__all__ = ["PlaneRefinementConfig", "PlaneRefinement", "plane_jacobians", "refine_in_subspace"]
+__all__ = ["PlaneFitCache", "PlaneFits", "PlaneRefinementConfig", "PlaneRefinement", "fit_planes",
+           "plane_jacobians", "refine_in_subspace"]
 
 
 @dataclass
@@ -85,6 +86,9 @@ class PlaneRefinementConfig:
             1000 (a 3 cm sigma); 0 = never.
         min_along_information: information [1/m^2] along the direction of travel from which
             the along-track refinement counts as holding it (default 100: a 10 cm sigma).
+        refine_constrained: after the checks above, refine the registration by point-to-plane
+            in every direction outside the degenerate subspace (the planes of the checks,
+            no extra nearest-neighbour query); default False.
         clear_information: a detected direction along which the refinement's information is
             at least this [1/m^2] is measured by the refined pose like a constrained one and
             removed from the degenerate subspace (default 2500: a 2 cm sigma, the configured
@@ -109,6 +113,7 @@ class PlaneRefinementConfig:
     weak_information: float = 1000.0
     min_along_information: float = 100.0
     clear_information: float = 2500.0
+    refine_constrained: bool = False
 
     def validate(self, prefix: str = "plane_refinement.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -201,6 +206,74 @@ def _planes(reference: ReferenceMap, q: np.ndarray, k: int, max_dist: float,
     return valid, normals, centroids, tilt_var
 
 
+@dataclass
+class PlaneFits:
+    """Local-map planes around a scan's points placed at one pose, for several refinements.
+
+    Attributes:
+        pose: 4x4 ``T_odom_lidar`` at which the points were associated.
+        points: (N, 3) the scan points used (thinned to ``points``), LiDAR frame [m].
+        valid: (N,) a plane was fitted for the point.
+        normals, centroids: (N, 3) plane normals and centroids, odometry frame [m].
+        tilt_var: (N,) variance of the fitted normal's tilt [rad^2].
+    """
+
+    pose: np.ndarray
+    points: np.ndarray
+    valid: np.ndarray
+    normals: np.ndarray
+    centroids: np.ndarray
+    tilt_var: np.ndarray
+
+    def near(self, pose: np.ndarray, max_translation: float = 0.05,
+             max_rotation: float = 0.002) -> bool:
+        """True when ``pose`` is within ``max_translation`` [m] and ``max_rotation`` [rad] of
+        the pose the planes were found at, so they can serve a refinement starting there
+        (a refinement keeps its associations while it moves anyway)."""
+        d = np.linalg.inv(self.pose) @ np.asarray(pose, dtype=float)
+        cos = np.clip(0.5 * (np.trace(d[:3, :3]) - 1.0), -1.0, 1.0)
+        return (float(np.linalg.norm(d[:3, 3])) <= max_translation
+                and float(np.arccos(cos)) <= max_rotation)
+
+
+def fit_planes(points: np.ndarray, reference: ReferenceMap, pose: np.ndarray,
+               config: PlaneRefinementConfig | None = None) -> PlaneFits:
+    """Thin the scan to ``config.points``, place it at ``pose`` and fit a local-map plane to
+    each point's ``normal_neighbors`` nearest map points (one k-d tree query)."""
+    cfg = config or PlaneRefinementConfig()
+    pose = geometry.orthonormalize(np.asarray(pose, dtype=float))
+    pts = geometry.drop_nonfinite_rows(np.asarray(points, dtype=float).reshape(-1, 3))
+    pts = pts[:: max(1, -(-len(pts) // cfg.points))]
+    if len(pts) < 10 or len(reference.points) < cfg.normal_neighbors:
+        none = np.zeros((len(pts), 3))
+        return PlaneFits(pose, pts, np.zeros(len(pts), bool), none, none.copy(),
+                         np.zeros(len(pts)))
+    q = pts @ pose[:3, :3].T + pose[:3, 3]
+    valid, normals, centroids, tilt_var = _planes(reference, q, cfg.normal_neighbors,
+                                                  cfg.max_neighbor_distance, cfg.min_planarity)
+    return PlaneFits(pose, pts, valid, normals, centroids, tilt_var)
+
+
+class PlaneFitCache:
+    """One scan's plane fits (:func:`fit_planes`), found once and reused by the refinements
+    of that scan that start near the same pose (:meth:`PlaneFits.near`); farther away they
+    are found again. ``queries`` counts the k-d tree queries made."""
+
+    def __init__(self, points: np.ndarray, reference: ReferenceMap,
+                 config: PlaneRefinementConfig | None = None) -> None:
+        self.points, self.reference = points, reference
+        self.config = config or PlaneRefinementConfig()
+        self.queries = 0
+        self._fits: PlaneFits | None = None
+
+    def at(self, pose: np.ndarray) -> PlaneFits:
+        """Plane fits usable for a refinement starting at ``pose``."""
+        if self._fits is None or not self._fits.near(pose):
+            self._fits = fit_planes(self.points, self.reference, pose, self.config)
+            self.queries += 1
+        return self._fits
+
+
 def _debiased(H: np.ndarray, points: np.ndarray, to_twist: np.ndarray,
               weights: np.ndarray) -> np.ndarray:
     """``H`` minus what the normals' fitting noise adds to it on average, PSD-clipped.
@@ -225,6 +298,7 @@ def refine_in_subspace(
     basis_scaled: np.ndarray,
     length: float,
     config: PlaneRefinementConfig | None = None,
+    fits: PlaneFits | None = None,
 ) -> PlaneRefinement:
     """Point-to-plane Gauss-Newton of ``pose`` restricted to the subspace (module docstring).
 
@@ -234,6 +308,8 @@ def refine_in_subspace(
         pose: 4x4 start ``T_odom_lidar``.
         basis_scaled: (k, 6) subspace rows, scaled LiDAR body twists.
         length: characteristic length L [m] of the scaling.
+        fits: planes already found for these points near ``pose`` (:func:`fit_planes`);
+            None: found here. Correspondences are gated by their residual at ``pose``.
     """
     cfg = config or PlaneRefinementConfig()
     B = orthonormal_rows(basis_scaled)
@@ -246,8 +322,9 @@ def refine_in_subspace(
 
     if kdim == 0:
         return PlaneRefinement(pose, np.zeros((0, 0)), np.zeros((6, 6)), B)
-    pts = geometry.drop_nonfinite_rows(np.asarray(points, dtype=float).reshape(-1, 3))
-    pts = pts[:: max(1, -(-len(pts) // cfg.points))]
+    if fits is None:
+        fits = fit_planes(points, reference, pose, cfg)
+    pts = fits.points
     if len(pts) < 10 or len(reference.points) < cfg.normal_neighbors:
         return empty("too few points")
     to_twist = np.linalg.inv(geometry.scaling_matrix(length)) @ B.T  # c -> plain body twist
@@ -255,9 +332,9 @@ def refine_in_subspace(
     # one association at the start pose: the planes stay fixed while the pose moves inside
     # the subspace (steps are bounded by max_step, the planes are local surfaces)
     q = pts @ pose[:3, :3].T + pose[:3, 3]
-    valid, normals, centroids, tilt_var = _planes(reference, q, cfg.normal_neighbors,
-                                                  cfg.max_neighbor_distance, cfg.min_planarity)
-    valid &= np.abs(np.einsum("ij,ij->i", normals, q - centroids)) <= cfg.max_residual
+    normals, centroids, tilt_var = fits.normals, fits.centroids, fits.tilt_var
+    valid = fits.valid & (np.abs(np.einsum("ij,ij->i", normals, q - centroids))
+                          <= cfg.max_residual)
     used = int(valid.sum())
     if used < min_used:
         return empty("too few plane correspondences", used)
