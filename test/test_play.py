@@ -150,3 +150,40 @@ def test_play_sensor_data_qos_publishes_best_effort_like_a_driver(tmp_path, monk
     assert proc.returncode == 0, err
     assert reliabilities == {ReliabilityPolicy.BEST_EFFORT}, reliabilities
     assert len(got) >= N_IMU - 1, len(got)  # best effort on loopback: (nearly) all arrive
+
+
+def test_play_restamp_puts_the_stamps_on_the_system_clock(tmp_path, monkeypatch):
+    bag = _tiny_bag(tmp_path / "tiny")
+    env = isolated_ros_env()
+    for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
+        monkeypatch.setenv(key, env[key])
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(env["ROS_DOMAIN_ID"]))
+    node = rclpy.create_node("play_listener", context=ctx)
+    got: list = []  # (stamp [s], system clock at reception [s])
+    node.create_subscription(message_class("sensor_msgs/msg/Imu"), "/ouster/imu",
+                             lambda m: got.append((M.stamp_seconds(m.header), time.time())),
+                             QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(node)
+    try:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "lili_odom.cli", "play", str(bag), "--rate", "1",
+             "--delay", "15.0", "--clock-hz", "0", "--topics", "/ouster/imu", "--restamp",
+             "--qos", "sensor-data"],
+            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline and proc.poll() is None:
+            executor.spin_once(timeout_sec=0.05)
+        _, err = proc.communicate(timeout=10)
+    finally:
+        executor.shutdown(timeout_sec=2.0)
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    assert proc.returncode == 0, err
+    assert len(got) >= N_IMU - 1, err  # best effort on loopback: (nearly) all arrive
+    stamps = np.array([s for s, _ in got])
+    spacing = np.diff(stamps) / 0.01
+    np.testing.assert_allclose(spacing, np.round(spacing), atol=1e-4)  # 10 ms grid kept
+    lag = np.array([r for _, r in got]) - stamps  # reception after the (new) stamp
+    assert np.all(lag > -0.05) and np.median(lag) < 1.0, lag

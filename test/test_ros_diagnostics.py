@@ -75,3 +75,38 @@ def test_diagnostics_report_missing_scans_and_save_map_writes_the_map(harness_fa
     future = client.call_async(Trigger.Request())
     assert wait_for(future.done, 10.0)
     assert not future.result().success and "pcd or .ply" in future.result().message
+
+
+def test_node_measures_the_latency_of_its_odometry(harness_factory):
+    """Clouds stamped with the node's own clock, a pipeline taking 50 ms: the latency in the
+    node's summary and in /diagnostics is the processing plus the transport."""
+    h = harness_factory(FakeProvider(delay=0.05),
+                        [Parameter("diagnostics_period", value=0.0),
+                         Parameter("diagnostics_publish_period", value=0.2)])
+    arrays: list = []
+    h.tester.create_subscription(DiagnosticArray, "/diagnostics", arrays.append,
+                                 QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
+    n = 8
+    for _ in range(n):
+        # the fake stamps its output with the header stamp: that is the sweep end here
+        h.pub_cloud.publish(h.cloud(h.node.get_clock().now().nanoseconds * 1e-9))
+        time.sleep(0.1)
+    assert wait_for(lambda: h.node.diagnostics()["latency_scans"] == n, 10.0), \
+        h.node.diagnostics()
+    d = h.node.diagnostics()
+    assert 0.05 <= d["latency_p50_s"] <= d["latency_p99_s"] <= d["latency_max_s"] < 2.0
+    assert d["latency_run_max_s"] == d["latency_max_s"] and d["latency_invalid"] == 0
+
+    def processing_status():
+        for arr in reversed(arrays):
+            for s in arr.status:
+                if s.name == "lili_odom: processing time":
+                    return s
+        return None
+
+    assert wait_for(lambda: processing_status() is not None and any(
+        kv.key == "latency_window_scans" and kv.value == str(n)
+        for kv in processing_status().values), 5.0)
+    values = {kv.key: kv.value for kv in processing_status().values}
+    assert float(values["latency_p99_s"]) == pytest.approx(d["latency_p99_s"], abs=1e-4)
+    assert "latency p50" in processing_status().message

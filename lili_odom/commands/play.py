@@ -11,6 +11,12 @@ as possible). ``/clock`` carries the bag log time of the playback position at ``
 (wall rate), so nodes with ``use_sim_time`` follow the bag. With ``--loop`` the clock jumps
 back to the start on every pass, as ``ros2 bag play --loop`` does.
 
+``--restamp`` shifts every ``header.stamp`` (of the messages that start with a
+``std_msgs/Header``: clouds, IMU, odometry; not ``/tf_static``) and ``/clock`` by the system
+clock's time at the start of playback minus the bag's start, as a live driver stamps: a node
+without ``use_sim_time`` then sees the stamps on its own clock (e.g. to measure its latency).
+Meant for ``--rate 1``; the shift is taken once, so ``--loop`` still jumps back.
+
 QoS (``--qos``): ``reliable`` (default): every publisher is RELIABLE (so reliable *and*
 best-effort subscribers match) with KEEP_LAST depth ``--qos-depth``, a lossless replay;
 ``sensor-data``: data topics are published BEST_EFFORT as a LiDAR driver does (ouster-ros's
@@ -25,6 +31,7 @@ unless the environment already names one.
 from __future__ import annotations
 
 import argparse
+import struct
 import sys
 import time
 
@@ -51,7 +58,36 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--qos", choices=("reliable", "sensor-data"), default="reliable",
                         help="publisher reliability: reliable (lossless replay, default) or "
                         "sensor-data (best effort, like a LiDAR driver)")
+    parser.add_argument("--restamp", action="store_true",
+                        help="shift header stamps and /clock so the bag starts now on the "
+                        "system clock, as a live driver stamps (for --rate 1)")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
+
+
+def shift_header_stamp(data: bytes, offset_ns: int) -> bytes:
+    """The CDR-serialised message ``data`` (4-byte encapsulation header, then a message whose
+    first field is a ``std_msgs/Header``) with ``header.stamp`` moved by ``offset_ns`` [ns].
+
+    Raises ValueError for data too short to hold a stamp or a stamp moved before 0."""
+    if len(data) < 12:
+        raise ValueError(f"{len(data)} bytes cannot hold a CDR header stamp")
+    endian = "<" if data[1] & 1 else ">"  # encapsulation kind: odd = little endian
+    sec, nanosec = struct.unpack_from(endian + "iI", data, 4)
+    total = sec * 1_000_000_000 + nanosec + int(offset_ns)
+    if total < 0:
+        raise ValueError(f"stamp {total * 1e-9:.3f} s before the epoch")
+    stamp = struct.pack(endian + "iI", *divmod(total, 1_000_000_000))
+    view = memoryview(data)
+    return b"".join((view[:4], stamp, view[12:]))
+
+
+def _starts_with_header(cls: type) -> bool:
+    """True when the message class's first field is a ``std_msgs/Header``."""
+    try:
+        fields = list(cls.get_fields_and_field_types().items())
+    except AttributeError:
+        return False
+    return bool(fields) and fields[0][1] in ("std_msgs/Header", "std_msgs/msg/Header")
 
 
 def _validate(args: argparse.Namespace) -> float:
@@ -101,6 +137,7 @@ def _play(reader, args: argparse.Namespace, rate: float) -> int:
                                  start_parameter_services=False)
         latched = reader.latched_topics
         publishers = {}
+        stamped = set()  # topics whose messages start with a header (--restamp)
         for topic, msgtype in reader.topic_types.items():
             if topic not in reader.selected_topics:
                 continue
@@ -122,6 +159,8 @@ def _play(reader, args: argparse.Namespace, rate: float) -> int:
                             else DurabilityPolicy.VOLATILE),
             )
             publishers[topic] = node.create_publisher(cls, topic, qos)
+            if _starts_with_header(cls):
+                stamped.add(topic)
         if not publishers:
             raise UserError(f"{args.bag}: none of the bag's message types can be published here")
         clock_pub = None
@@ -138,13 +177,19 @@ def _play(reader, args: argparse.Namespace, rate: float) -> int:
             # the subscriber side may learn of our writer slightly later than we learnt of it
             time.sleep(min(0.5, args.delay))
 
+        bag_start = int(reader.start_time * 1e9) + int(args.start * 1e9)
+        offset_ns = time.time_ns() - bag_start if args.restamp else 0
+
         def publish_clock(t_ns: int) -> None:
             if clock_pub is not None:
                 msg = Clock()
-                msg.clock.sec, msg.clock.nanosec = divmod(max(0, int(t_ns)), 1_000_000_000)
+                msg.clock.sec, msg.clock.nanosec = divmod(max(0, int(t_ns) + offset_ns),
+                                                          1_000_000_000)
                 clock_pub.publish(msg)
 
-        bag_start = int(reader.start_time * 1e9) + int(args.start * 1e9)
+        def restamp(topic: str, data: bytes) -> bytes:
+            return shift_header_stamp(data, offset_ns) if topic in stamped else data
+
         clock_period = 1.0 / args.clock_hz if args.clock_hz > 0 else float("inf")
         total = 0
         passes = 0
@@ -152,7 +197,7 @@ def _play(reader, args: argparse.Namespace, rate: float) -> int:
         while True:
             passes += 1
             n = _one_pass(reader, publishers, publish_clock, bag_start, rate, clock_period,
-                          context)
+                          context, restamp if args.restamp else None)
             total += n
             if not args.loop or n == 0 or not context.ok():
                 break
@@ -177,8 +222,9 @@ def _play(reader, args: argparse.Namespace, rate: float) -> int:
 
 
 def _one_pass(reader, publishers, publish_clock, bag_start: int, rate: float,
-              clock_period: float, context) -> int:
-    """Publish every message once; returns the count."""
+              clock_period: float, context, restamp=None) -> int:
+    """Publish every message once (``restamp(topic, data)``, when given, rewrites the raw
+    bytes first); returns the count."""
     wall_start = time.monotonic()
     next_clock = wall_start
     last_clock_bag = None
@@ -202,6 +248,6 @@ def _one_pass(reader, publishers, publish_clock, bag_start: int, rate: float,
         elif last_clock_bag is None or (raw.log_time_ns - last_clock_bag) * 1e-9 >= clock_period:
             publish_clock(raw.log_time_ns)
             last_clock_bag = raw.log_time_ns
-        pub.publish(raw.data)
+        pub.publish(raw.data if restamp is None else restamp(raw.topic, raw.data))
         count += 1
     return count

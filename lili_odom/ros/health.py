@@ -9,7 +9,8 @@ and publishes what :meth:`HealthMonitor.statuses` returns as a
 Concerns: ``lidar input``, ``imu input``, ``wheel input`` (rates over the last ``window_s`` of
 wall time against the expected rates), ``scans dropped and missing`` (the node's queue drops;
 scans missing from gaps in the header stamps, i.e. lost before they reached the node),
-``processing time`` (per scan, against the LiDAR period), ``degeneracy`` (dimension and
+``processing time`` (per scan, against the LiDAR period; with the latency from a scan's sweep
+end to its published odometry, :mod:`lili_odom.ros.latency`), ``degeneracy`` (dimension and
 directions of the last scan), ``wheel scale`` (the online estimate) and ``fusion`` (failures
 counted by the pipeline, scans without output).
 """
@@ -22,6 +23,8 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
+
+from lili_odom.ros.latency import DEFAULT_WINDOW, LatencyStats
 
 __all__ = ["OK", "WARN", "ERROR", "STALE", "Status", "HealthConfig", "StampGapCounter",
            "RateMeter", "HealthMonitor", "describe_direction"]
@@ -52,6 +55,7 @@ class HealthConfig:
             errors (default 0.01 / 0.2).
         silence_error_s: no scan for this long after scans arrived is an error [s] (default 2).
         max_wheel_scale_error: an estimate farther than this from 1 warns (default 0.1).
+        latency_window: scans over which the latency percentiles are taken (default 1000).
     """
 
     lidar_hz: float = 10.0
@@ -63,6 +67,7 @@ class HealthConfig:
     loss_error: float = 0.2
     silence_error_s: float = 2.0
     max_wheel_scale_error: float = 0.1
+    latency_window: int = DEFAULT_WINDOW
 
 
 class StampGapCounter:
@@ -171,6 +176,7 @@ class HealthMonitor:
         self.dropped_meter = RateMeter(c.window_s, clock)
         self.gaps = StampGapCounter(1.0 / c.lidar_hz if c.lidar_hz > 0 else 0.0)
         self._proc: deque[float] = deque(maxlen=50)
+        self.latency = LatencyStats(c.latency_window)
         self.last_output: Any = None
         self._failures_seen: dict[str, int] = {}
         self._failure_meter = RateMeter(c.window_s, clock)
@@ -202,6 +208,10 @@ class HealthMonitor:
             self.scans_without_output += 1
         else:
             self.last_output = output
+
+    def on_published(self, latency_s: float) -> None:
+        """A scan's odometry was published ``latency_s`` [s] after its sweep ended."""
+        self.latency.add(latency_s)
 
     def on_pipeline_counters(self, counters: Mapping[str, int]) -> None:
         """Pipeline counters (``OdometryPipeline.counters``): failures since the last call
@@ -297,6 +307,14 @@ class HealthMonitor:
         values = {"mean_s": _fmt(mean, 4), "max_s": _fmt(worst, 4),
                   "period_s": _fmt(period, 3), "scans": str(len(times))}
         text = f"mean {1000 * mean:.0f} ms, max {1000 * worst:.0f} ms per scan"
+        lat = self.latency.percentiles()
+        if lat is not None:
+            values.update({"latency_p50_s": _fmt(lat["p50"], 4),
+                           "latency_p99_s": _fmt(lat["p99"], 4),
+                           "latency_max_s": _fmt(lat["max"], 4),
+                           "latency_window_scans": str(len(self.latency))})
+            text += (f"; latency p50 {1000 * lat['p50']:.0f} / p99 {1000 * lat['p99']:.0f} / "
+                     f"max {1000 * lat['max']:.0f} ms")
         if mean > 1.5 * period:
             return Status(name, ERROR, text + f" (period {1000 * period:.0f} ms)", values)
         if mean > 0.8 * period:

@@ -54,6 +54,12 @@ Time: all stamps come from the messages' headers; ``use_sim_time`` (standard par
 affects the node clock. When a scan stamp goes back by more than 1 s (a bag restarted), the
 pipeline and the path are reset.
 
+Latency: for every published odometry the node records its clock (ROS time) at publication
+minus the scan's sweep end (the output's stamp: ``header.stamp`` + the sweep duration,
+:mod:`lili_odom.ros.latency`); p50 / p99 / max over the last 1000 scans are in the
+``processing time`` status of ``/diagnostics`` and, with the run's count and maximum, in
+:meth:`LiliOdomNode.diagnostics` (logged every ``diagnostics_period`` s and at shutdown).
+
 Not driven by the node: ``ground_truth_topic`` (offline evaluation only).
 
 Parameters: the provider's (``lili_odom.config.NodeConfig``'s dotted names, as in
@@ -244,6 +250,7 @@ class LiliOdomNode(Node):
             self.create_timer(period, self._log_diagnostics,
                               clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._stop = threading.Event()
+        self._summary_logged = False
         self._worker = threading.Thread(target=self._work, name="lili_odom_worker", daemon=True)
         self._worker.start()
 
@@ -376,6 +383,7 @@ class LiliOdomNode(Node):
         f, p = self._factory, self.p
         frame = p["odom_frame"]
         self.pub_odom.publish(M.odometry_msg(f, out, frame, p["base_frame"]))
+        self.health.on_published(self.get_clock().now().nanoseconds * 1e-9 - float(out.stamp))
         self.pub_markers.publish(M.degeneracy_markers(f, out, frame,
                                                       float(p["marker_arrow_length"])))
         self.pub_basis.publish(M.degeneracy_json_msg(f, out))
@@ -467,6 +475,7 @@ class LiliOdomNode(Node):
         out["scans_queued"] = len(self._scans)  # handed over, not yet taken by the worker
         n = max(1, out["scans_processed"])
         out["mean_processing_s"] = round(self._processing_time / n, 4)
+        out.update(self.health.latency.summary())
         for k, v in dict(getattr(self.pipeline, "counters", {}) or {}).items():
             out[f"pipeline.{k}"] = v
         return out
@@ -501,11 +510,19 @@ class LiliOdomNode(Node):
         self.get_logger().info("diagnostics " + json.dumps(self.diagnostics(), default=str))
 
     def shutdown(self, timeout: float = 5.0) -> None:
-        """Stop the worker thread (waits for the scan in progress)."""
+        """Stop the worker thread (waits for the scan in progress) and log the final
+        :meth:`diagnostics` once."""
         self._stop.set()
         self._scans.close()
         if self._worker.is_alive():
             self._worker.join(timeout)
+        if not self._summary_logged:
+            self._summary_logged = True
+            try:
+                self.get_logger().info("final diagnostics "
+                                       + json.dumps(self.diagnostics(), default=str))
+            except Exception:  # noqa: BLE001 - a failed last log must not fail the shutdown
+                pass
 
     def destroy_node(self) -> None:
         self.shutdown()
