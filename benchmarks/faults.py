@@ -12,11 +12,13 @@ the injector vs processed vs skipped (pipeline counter names), wall time, peak R
 Play rates (``--play-rates``): ``lili-odom play --rate R`` of the CI bag into the node
 (in-process, real pipeline, isolated DDS domain) and a recorder, for increasing R; the fastest
 rate at which every scan arrived, none was dropped and every scan gave one odometry message.
+The same worker (:func:`worker_play`) serves ``python -m benchmarks.node_latency``.
 
 Bad-input tests (``--bad-input-tests``): runs the robustness test files and counts the cases.
 
 Writes ``benchmarks/results/robustness.json`` (each part under its own key, so the parts can be
-re-run separately; ``python -m benchmarks.long_run`` adds ``long_run``) and renders
+re-run separately; ``python -m benchmarks.long_run`` adds ``long_run`` or, at another
+resolution, ``long_run_<rows>x<cols>``) and renders
 ``benchmarks/results/robustness.md`` from it.
 
     python -m benchmarks.faults                       # fault runs (~15 min on 2 cores)
@@ -185,7 +187,15 @@ def FaultSpecText(kwargs: dict) -> str:
 
 # --------------------------------------------------------------------------- play rates
 def worker_play(job: dict) -> dict:
-    """Play the CI bag at job['rate'] into an in-process node; returns its counts."""
+    """Play a bag at job['rate'] into an in-process node; returns its counts and the latency
+    it measured (:meth:`lili_odom.ros.node.LiliOdomNode.diagnostics`).
+
+    Optional job keys: ``bag`` (default the CI bag), ``parameters`` (more node parameters),
+    ``play_args`` (more ``lili-odom play`` arguments, e.g. ``["--restamp"]``),
+    ``play_timeout`` [s] (default 600). With ``--restamp`` the result also holds the node's
+    ``latency_*`` figures, its processing-time status and ``received_latency_s``: per
+    odometry message in arrival order, the recorder's system clock at reception minus the
+    message's stamp [s]."""
     import random
     import threading
 
@@ -194,12 +204,16 @@ def worker_play(job: dict) -> dict:
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
     from lili_odom.bagio.reader import BagReader
+    from lili_odom.messages import stamp_seconds
+    from lili_odom.ros.dds import apply_dds_defaults
     from lili_odom.ros.factory import message_class
     from lili_odom.ros.node import LiliOdomNode, parameters_from_mapping
     from lili_odom.ros.provider import OdometryPipelineProvider
 
-    with BagReader(CI_BAG, topics=[LIDAR]) as reader:
+    bag = Path(job.get("bag") or CI_BAG)
+    with BagReader(bag, topics=[LIDAR]) as reader:
         published = reader.message_count
+    apply_dds_defaults()  # as lili_odom_node does
     env = dict(os.environ)
     env["ROS_DOMAIN_ID"] = str(random.randint(100, 200))
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -214,12 +228,16 @@ def worker_play(job: dict) -> dict:
                             {"pipeline.method": job["method"], "diagnostics_period": 0.0,
                              # play publishes RELIABLE: a lossless replay, so what is lost
                              # is the node's doing (dropped, counted), not the transport's
-                             "reliable_inputs": True}))
+                             "reliable_inputs": True, **job.get("parameters", {})}))
     recorder = rclpy.create_node("recorder", context=ctx)
-    got: list = []
+    got: list = []  # per odometry message: its stamp and the system clock at reception [s]
+
+    def record(msg) -> None:
+        got.append((stamp_seconds(msg.header), time.time()))
+
     recorder.create_subscription(message_class("nav_msgs/msg/Odometry"), "/lili_odom/odometry",
-                                 got.append, QoSProfile(depth=1000,
-                                                        reliability=ReliabilityPolicy.RELIABLE))
+                                 record, QoSProfile(depth=1000,
+                                                    reliability=ReliabilityPolicy.RELIABLE))
     executor = SingleThreadedExecutor(context=ctx)
     executor.add_node(node)
     executor.add_node(recorder)
@@ -227,10 +245,11 @@ def worker_play(job: dict) -> dict:
     spin.start()
     try:
         t0 = time.monotonic()
-        play = subprocess.run([sys.executable, "-m", "lili_odom.cli", "play", str(CI_BAG),
+        play = subprocess.run([sys.executable, "-m", "lili_odom.cli", "play", str(bag),
                                "--rate", str(job["rate"]), "--delay", "20", "--quiet",
-                               "--topics", LIDAR, IMU, WHEEL],
-                              env=env, capture_output=True, text=True, timeout=600)
+                               "--topics", LIDAR, IMU, WHEEL, *job.get("play_args", [])],
+                              env=env, capture_output=True, text=True,
+                              timeout=float(job.get("play_timeout", 600.0)))
         play_s = time.monotonic() - t0
         deadline = time.monotonic() + 60.0
         while time.monotonic() < deadline:
@@ -242,6 +261,8 @@ def worker_play(job: dict) -> dict:
             time.sleep(0.1)
         time.sleep(0.3)
         diag = node.diagnostics()
+        processing = next((st for st in node.diagnostic_statuses()
+                           if st.name == "lili_odom: processing time"), None)
     finally:
         # the spin thread must be out of rclpy's wait before the interpreter exits: a daemon
         # thread still inside it at exit aborts the process (ros2/rclpy#1484)
@@ -258,10 +279,18 @@ def worker_play(job: dict) -> dict:
             "no_output": diag["scans_no_output"], "errors": diag["scan_errors"],
             "odometry": len(got), "mean_processing_s": diag["mean_processing_s"],
             "imu_received": diag["imu_received"], "wheel_received": diag["wheel_received"],
+            "missing": diag["scans_missing"],
             "nothing_lost": int(diag["scans_received"] == published and len(got) == published
                                 and diag["scans_dropped"] == 0),
             "accounted": int(len(got) + diag["scans_dropped"] + diag["scans_no_output"]
-                             == diag["scans_received"])}
+                             == diag["scans_received"]),
+            # with the stamps on the system clock (else these compare the bag's old stamps
+            # with today): the node's latency figures, and reception minus stamp per odometry
+            # message as the recorder saw it
+            **({**{k: v for k, v in diag.items() if k.startswith("latency_")},
+                "processing_status": processing.message if processing is not None else "",
+                "received_latency_s": [round(t - stamp, 5) for stamp, t in got]}
+               if "--restamp" in job.get("play_args", []) else {})}
 
 
 def play_rates(args) -> dict:
@@ -339,6 +368,32 @@ def _f(x, fmt=".3f") -> str:
         return format(float(x), fmt)
     except (TypeError, ValueError):
         return "-"
+
+
+#: Peak RSS the odometry must stay under on the long run [MiB] (1.5 GB = 1.5e9 bytes).
+LONG_RUN_RSS_TARGET_MB = 1.5e9 / 2 ** 20
+
+
+def long_run_lines(lr: dict, section: str = "long_run") -> list[str]:
+    """The report's lines for one ``python -m benchmarks.long_run`` result stored under
+    ``section`` (its plot is ``<section>_memory.png``)."""
+    peak = lr["peak_rss_mb"]
+    target = LONG_RUN_RSS_TARGET_MB
+    return [f"## Long run (memory): {lr['bag']}", "",
+            f"{lr['bag']}, method `{lr['method']}`: {lr['scans']} scans, path "
+            f"{_f(lr.get('path_length_m'), '.0f')} m, ATE {_f(lr.get('ate_rmse_m'))} m, "
+            f"wall {_f(lr.get('wall_time_s'), '.0f')} s. RSS sampled every "
+            f"{lr['every']} scans (`/proc/self/statm`).", "",
+            f"- peak RSS: {_f(peak, '.0f')} MB (getrusage), sampled max "
+            f"{_f(lr['max_sampled_rss_mb'], '.0f')} MB; RSS after the first scan "
+            f"{_f(lr['first_rss_mb'], '.0f')} MB",
+            f"- peak RSS under 1.5 GB ({target:.0f} MB of 2^20 bytes): "
+            f"**{'met' if peak < target else 'missed'}**",
+            f"- second half trend: {_f(lr['trend_mb_per_100_scans'], '+.2f')} MB per 100 "
+            f"scans (linear fit over scans {lr['second_half_from']}-{lr['scans']})",
+            f"- local map points at the end: {lr.get('map_points_end', '-')} (max "
+            f"{lr.get('map_points_max', '-')})", "",
+            f"![long run memory]({section}_memory.png)", ""]
 
 
 def render(data: dict) -> str:
@@ -446,21 +501,8 @@ def render(data: dict) -> str:
             L.append(f"- fastest rate with nothing lost, `{m}`: "
                      f"{'below the lowest rate tried' if not rate else f'{rate:g}x'}")
         L.append("")
-    lr = data.get("long_run")
-    if lr:
-        L += ["## Long run (memory)", "",
-              f"{lr['bag']}, method `{lr['method']}`: {lr['scans']} scans, path "
-              f"{_f(lr.get('path_length_m'), '.0f')} m, ATE {_f(lr.get('ate_rmse_m'))} m, "
-              f"wall {_f(lr.get('wall_time_s'), '.0f')} s. RSS sampled every "
-              f"{lr['every']} scans (`/proc/self/statm`).", "",
-              f"- peak RSS: {_f(lr['peak_rss_mb'], '.0f')} MB (getrusage), sampled max "
-              f"{_f(lr['max_sampled_rss_mb'], '.0f')} MB; RSS after the first scan "
-              f"{_f(lr['first_rss_mb'], '.0f')} MB",
-              f"- second half trend: {_f(lr['trend_mb_per_100_scans'], '+.2f')} MB per 100 "
-              f"scans (linear fit over scans {lr['second_half_from']}-{lr['scans']})",
-              f"- local map points at the end: {lr.get('map_points_end', '-')} (max "
-              f"{lr.get('map_points_max', '-')})", "",
-              "![long run memory](long_run_memory.png)", ""]
+    for section in sorted(k for k in data if k.startswith("long_run")):
+        L += long_run_lines(data[section], section)
     notes = data.get("notes")
     if notes:
         L += ["## Findings", ""] + [f"- {n}" for n in notes] + [""]

@@ -62,6 +62,13 @@ GOAL_SCANS_PER_S = 20.0
 TARGET_DETECTOR_MS = 50.0
 TARGET_KISS_RATIO = 2.0
 WINDOW_NAMES = {90.0: "featureless tunnel (degenerate)", 5.0: "entrance (not degenerate)"}
+#: The report's pointer to the per-resolution reports beside it.
+SEE_ALSO = ("Whole runs at every resolution of the scenario suite (32, 64 and 128 beams; 512, "
+            "1024 and 2048 columns): `lili-odom run` against KISS-ICP's own pipeline on the "
+            "same bag, side by side in one benchmark, target at most 1.5x KISS-ICP's wall time, "
+            "in [`speed_resolutions.md`](speed_resolutions.md) (`python -m "
+            "benchmarks.speed_resolutions`); the node's latency and drops at 10 Hz in "
+            "[`node_latency.md`](node_latency.md) (`python -m benchmarks.node_latency`).")
 
 
 # ----------------------------------------------------------------------------- one method
@@ -455,6 +462,8 @@ def markdown(report: dict[str, Any], command: str) -> str:
     m, load = report["machine"], report["load"]
     lines = [
         "# Odometry speed on full OS1-128 scans (issue #5)",
+        "",
+        SEE_ALSO,
         "",
         f"`{command}`: {report['scans']} scans of `{report['bag']}` per window and method "
         f"(the first {report['warmup']} not counted), each method in its own fresh process, "
