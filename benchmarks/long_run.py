@@ -11,7 +11,7 @@ stay side by side) to ``benchmarks/results/robustness.{json,md}``, with the peak
 the 1.5 GB target, and writes ``benchmarks/results/<section>_memory.png``.
 
     python -m benchmarks.long_run                          # method none, 32x256 (~10 min)
-    python -m benchmarks.long_run --method lili --resolution 128x1024   # ~35 GB of bag
+    python -m benchmarks.long_run --method lili --resolution 128x1024   # ~15 GB of bag
 """
 from __future__ import annotations
 
