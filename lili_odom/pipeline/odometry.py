@@ -585,8 +585,9 @@ class OdometryPipeline:
     def _refine_constrained(self, planes: PlaneFitCache, pose: np.ndarray,
                             degeneracy: DegeneracyResult) -> np.ndarray:
         """``pose`` refined by point-to-plane in the directions outside the degenerate
-        subspace (``plane_refinement.refine_constrained``); ``pose`` itself when the planes
-        are too few."""
+        subspace that point-to-plane holds as well as a well-constrained one (information
+        at least ``plane_refinement.clear_information``; ``refine_constrained``); elsewhere
+        the registration's pose stays. ``pose`` itself when there are none."""
         cfg = self.config.plane_refinement
         if not (cfg.enabled and cfg.refine_constrained):
             return pose
@@ -594,9 +595,19 @@ class OdometryPipeline:
         C = orthonormal_rows(np.eye(6) - B.T @ B, rtol=1e-3) if len(B) else np.eye(6)
         if not len(C):
             return pose
-        refined = refine_in_subspace(planes.points, planes.reference, pose, C,
-                                     degeneracy.characteristic_length, cfg,
-                                     fits=planes.at(pose))
+        length = degeneracy.characteristic_length
+        fits = planes.at(pose)
+        held = refine_in_subspace(planes.points, planes.reference, pose, C, length,
+                                  replace(cfg, iterations=0), fits=fits)
+        if not held.ok:
+            return pose
+        w, V = np.linalg.eigh(0.5 * (held.information + held.information.T))
+        strong = w >= cfg.clear_information
+        if not strong.any():
+            return pose
+        refined = refine_in_subspace(planes.points, planes.reference, pose,
+                                     V[:, strong].T @ held.basis_scaled, length, cfg,
+                                     fits=fits)
         if not refined.ok:
             return pose
         self.counters["constrained_refined"] += 1

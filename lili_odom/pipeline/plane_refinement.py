@@ -87,8 +87,9 @@ class PlaneRefinementConfig:
         min_along_information: information [1/m^2] along the direction of travel from which
             the along-track refinement counts as holding it (default 100: a 10 cm sigma).
         refine_constrained: after the checks above, refine the registration by point-to-plane
-            in every direction outside the degenerate subspace (the planes of the checks,
-            no extra nearest-neighbour query); default False.
+            in the directions outside the degenerate subspace that it holds with at least
+            ``clear_information`` (the planes of the checks, no extra nearest-neighbour
+            query); default False.
         clear_information: a detected direction along which the refinement's information is
             at least this [1/m^2] is measured by the refined pose like a constrained one and
             removed from the degenerate subspace (default 2500: a 2 cm sigma, the configured
