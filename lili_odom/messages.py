@@ -32,6 +32,7 @@ import logging
 import math
 from typing import Any, Callable, Iterable, MutableMapping, Protocol, Sequence
 
+import gtsam
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -133,7 +134,10 @@ def pose_to_matrix(pose: Any) -> np.ndarray:
 def matrix_to_pose_values(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """4x4 -> (position (3,), quaternion (x, y, z, w) with w >= 0)."""
     T = np.asarray(T, dtype=np.float64)
-    quat = Rotation.from_matrix(T[:3, :3]).as_quat()
+    q = gtsam.Rot3(np.ascontiguousarray(T[:3, :3])).toQuaternion()
+    quat = np.array([q.x(), q.y(), q.z(), q.w()])
+    if not (np.all(np.isfinite(quat)) and abs(float(quat @ quat) - 1.0) < 1e-6):
+        quat = Rotation.from_matrix(T[:3, :3]).as_quat()  # not a rotation: scipy's projection
     if quat[3] < 0:
         quat = -quat
     return T[:3, 3].copy(), quat
