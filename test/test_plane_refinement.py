@@ -218,3 +218,32 @@ def test_plane_fits_are_shared_near_their_pose_and_found_again_farther_away():
     np.testing.assert_allclose(shared.pose, own.pose, atol=1e-12)
     np.testing.assert_allclose(shared.information, own.information, rtol=1e-9)
     assert abs(own.pose[0, 3] - 20.0) < 0.03
+
+
+def test_constrained_directions_are_refined_where_point_to_plane_holds_them():
+    from lili_odom.degeneracy.result import DegeneracyResult
+
+    none = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0)
+    off_by = pose_at(5.0)
+    off_by[:3, 3] += [0.08, 0.06, 0.0]  # 8 cm along, 6 cm across a short closed corridor
+    boxed = corridor(10.0, end_walls=True)
+    pipeline = _pipeline_over(boxed, 4.9)
+    pipeline.config.plane_refinement.refine_constrained = True
+    refined = pipeline._refine_constrained(planes(pipeline, scan_at(boxed, 5.0)), off_by, none)
+    np.testing.assert_allclose(refined[:3, 3], [5.0, 0.0, 1.5], atol=0.02)
+    # in a tube the axis is not held: only the offset across it is removed
+    tube = corridor(200.0, end_walls=False)
+    pipeline = _pipeline_over(tube, 99.9)
+    pipeline.config.plane_refinement.refine_constrained = True
+    off_by = pose_at(100.0)
+    off_by[:3, 3] += [0.08, 0.06, 0.0]
+    refined = pipeline._refine_constrained(planes(pipeline, scan_at(tube, 100.0)), off_by, none)
+    assert abs(refined[1, 3]) < 0.02 and abs(refined[0, 3] - 100.08) < 1e-3
+    # a detected direction is left where it was put, and the option off moves nothing
+    across = DegeneracyResult("lili", np.eye(4), AXIS_Y, 10.0)
+    refined = pipeline._refine_constrained(planes(pipeline, scan_at(tube, 100.0)), off_by,
+                                           across)
+    assert abs(refined[1, 3] - 0.06) < 1e-3
+    pipeline.config.plane_refinement.refine_constrained = False
+    assert pipeline._refine_constrained(planes(pipeline, scan_at(tube, 100.0)), off_by,
+                                        none) is off_by

@@ -585,9 +585,14 @@ class OdometryPipeline:
     def _refine_constrained(self, planes: PlaneFitCache, pose: np.ndarray,
                             degeneracy: DegeneracyResult) -> np.ndarray:
         """``pose`` refined by point-to-plane in the directions outside the degenerate
-        subspace that point-to-plane holds as well as a well-constrained one (information
-        at least ``plane_refinement.clear_information``; ``refine_constrained``); elsewhere
-        the registration's pose stays. ``pose`` itself when there are none."""
+        subspace that point-to-plane holds as well as a well-constrained one
+        (``plane_refinement.refine_constrained``); ``pose`` itself when there are none.
+
+        The refinement runs in every direction outside the subspace; its information at the
+        result (where the residuals no longer carry the registration's offset) tells which
+        directions are held with at least ``clear_information``, and only the step's part
+        along those is kept (scaled twists); along the others the registration stays.
+        """
         cfg = self.config.plane_refinement
         if not (cfg.enabled and cfg.refine_constrained):
             return pose
@@ -596,22 +601,21 @@ class OdometryPipeline:
         if not len(C):
             return pose
         length = degeneracy.characteristic_length
-        fits = planes.at(pose)
-        held = refine_in_subspace(planes.points, planes.reference, pose, C, length,
-                                  replace(cfg, iterations=0), fits=fits)
-        if not held.ok:
+        refined = refine_in_subspace(planes.points, planes.reference, pose, C, length, cfg,
+                                     fits=planes.at(pose))
+        if not refined.ok:
             return pose
-        w, V = np.linalg.eigh(0.5 * (held.information + held.information.T))
+        w, V = np.linalg.eigh(0.5 * (refined.information + refined.information.T))
         strong = w >= cfg.clear_information
         if not strong.any():
             return pose
-        refined = refine_in_subspace(planes.points, planes.reference, pose,
-                                     V[:, strong].T @ held.basis_scaled, length, cfg,
-                                     fits=fits)
-        if not refined.ok:
-            return pose
         self.counters["constrained_refined"] += 1
-        return refined.pose
+        if strong.all():
+            return refined.pose
+        rows = V[:, strong].T @ refined.basis_scaled
+        step = geometry.scale_twist(geometry.log(np.linalg.inv(pose) @ refined.pose), length)
+        kept = geometry.unscale_twist(rows.T @ (rows @ step), length)
+        return geometry.orthonormalize(pose @ geometry.exp(kept))
 
     def _clear_held_directions(self, degeneracy: DegeneracyResult, refined
                                ) -> tuple[DegeneracyResult, np.ndarray]:
