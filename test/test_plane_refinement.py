@@ -228,13 +228,13 @@ def test_constrained_directions_are_refined_where_point_to_plane_holds_them():
     off_by[:3, 3] += [0.08, 0.06, 0.0]  # 8 cm along, 6 cm across a short closed corridor
     boxed = corridor(10.0, end_walls=True)
     pipeline = _pipeline_over(boxed, 4.9)
-    pipeline.config.plane_refinement.refine_constrained = True
+    pipeline.config.plane_refinement.refine_constrained = "all"
     refined = pipeline._refine_constrained(planes(pipeline, scan_at(boxed, 5.0)), off_by, none)
     np.testing.assert_allclose(refined[:3, 3], [5.0, 0.0, 1.5], atol=0.02)
     # in a tube the axis is not held: only the offset across it is removed
     tube = corridor(200.0, end_walls=False)
     pipeline = _pipeline_over(tube, 99.9)
-    pipeline.config.plane_refinement.refine_constrained = True
+    pipeline.config.plane_refinement.refine_constrained = "all"
     off_by = pose_at(100.0)
     off_by[:3, 3] += [0.08, 0.06, 0.0]
     refined = pipeline._refine_constrained(planes(pipeline, scan_at(tube, 100.0)), off_by, none)
@@ -244,6 +244,14 @@ def test_constrained_directions_are_refined_where_point_to_plane_holds_them():
     refined = pipeline._refine_constrained(planes(pipeline, scan_at(tube, 100.0)), off_by,
                                            across)
     assert abs(refined[1, 3] - 0.06) < 1e-3
-    pipeline.config.plane_refinement.refine_constrained = False
+    pipeline.config.plane_refinement.refine_constrained = "off"
     assert pipeline._refine_constrained(planes(pipeline, scan_at(tube, 100.0)), off_by,
                                         none) is off_by
+    # planar: base_link's forward, lateral and yaw only; a height offset stays
+    pipeline.config.plane_refinement.refine_constrained = "planar"
+    high = off_by.copy()
+    high[2, 3] += 0.05
+    refined = pipeline._refine_constrained(planes(pipeline, scan_at(tube, 100.0)), high, none)
+    assert abs(refined[1, 3]) < 0.02 and abs(refined[2, 3] - 1.55) < 2e-3
+    with pytest.raises(ValueError, match="refine_constrained"):
+        PlaneRefinementConfig(refine_constrained="yes").validate()

@@ -512,13 +512,7 @@ class OdometryPipeline:
             return None
         B = degeneracy.basis_scaled
         length = degeneracy.characteristic_length
-        # the ground robot's own motion (forward, lateral, yaw of base_link) as scaled LiDAR
-        # twists, without what the subspace already holds
-        planar = np.linalg.solve(scaled_lidar_to_base(self.T_base_lidar, length),
-                                 np.eye(6)[:, [0, 1, 5]]).T
-        if len(B):
-            planar = planar - planar @ B.T @ B
-        C = orthonormal_rows(planar, rtol=1e-3)
+        C = self._outside(degeneracy, planar=True)
         if not len(C):
             return None
         full = refine_in_subspace(planes.points, planes.reference, pose, C, length,
@@ -582,11 +576,28 @@ class OdometryPipeline:
                                                 basis_scaled=np.vstack([B, direction]),
                                                 details=details))
 
+    def _outside(self, degeneracy: DegeneracyResult, planar: bool) -> np.ndarray:
+        """Orthonormal rows (scaled LiDAR twists, the detection's characteristic length)
+        spanning the directions outside the detected subspace: all of them, or with
+        ``planar`` only the ground robot's own motion (forward, lateral and yaw of
+        base_link)."""
+        B = degeneracy.basis_scaled
+        if planar:
+            length = degeneracy.characteristic_length
+            rows = np.linalg.solve(scaled_lidar_to_base(self.T_base_lidar, length),
+                                   np.eye(6)[:, [0, 1, 5]]).T
+        else:
+            rows = np.eye(6)
+        if len(B):
+            rows = rows - rows @ B.T @ B
+        return orthonormal_rows(rows, rtol=1e-3)
+
     def _refine_constrained(self, planes: PlaneFitCache, pose: np.ndarray,
                             degeneracy: DegeneracyResult) -> np.ndarray:
         """``pose`` refined by point-to-plane in the directions outside the degenerate
-        subspace that point-to-plane holds as well as a well-constrained one
-        (``plane_refinement.refine_constrained``); ``pose`` itself when there are none.
+        subspace (all, or base_link's planar motion: ``plane_refinement.refine_constrained``)
+        that point-to-plane holds as well as a well-constrained one; ``pose`` itself when
+        there are none.
 
         The refinement runs in every direction outside the subspace; its information at the
         result (where the residuals no longer carry the registration's offset) tells which
@@ -594,10 +605,9 @@ class OdometryPipeline:
         along those is kept (scaled twists); along the others the registration stays.
         """
         cfg = self.config.plane_refinement
-        if not (cfg.enabled and cfg.refine_constrained):
+        if not cfg.enabled or cfg.refine_constrained == "off":
             return pose
-        B = degeneracy.basis_scaled
-        C = orthonormal_rows(np.eye(6) - B.T @ B, rtol=1e-3) if len(B) else np.eye(6)
+        C = self._outside(degeneracy, planar=cfg.refine_constrained == "planar")
         if not len(C):
             return pose
         length = degeneracy.characteristic_length

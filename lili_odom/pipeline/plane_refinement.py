@@ -47,6 +47,10 @@ __all__ = ["PlaneFitCache", "PlaneFits", "PlaneRefinementConfig", "PlaneRefineme
            "plane_jacobians", "refine_in_subspace"]
 
 
+#: Values of ``PlaneRefinementConfig.refine_constrained``.
+REFINE_CONSTRAINED = ("off", "all", "planar")
+
+
 @dataclass
 class PlaneRefinementConfig:
     """Attributes:
@@ -89,7 +93,8 @@ class PlaneRefinementConfig:
         refine_constrained: after the checks above, refine the registration by point-to-plane
             in the directions outside the degenerate subspace that it holds with at least
             ``clear_information`` (the planes of the checks, no extra nearest-neighbour
-            query); default False.
+            query): ``off`` (default), ``all`` (every such direction) or ``planar`` (only
+            base_link's forward, lateral and yaw motion).
         clear_information: a detected direction along which the refinement's information is
             at least this [1/m^2] is measured by the refined pose like a constrained one and
             removed from the degenerate subspace (default 2500: a 2 cm sigma, the configured
@@ -114,7 +119,7 @@ class PlaneRefinementConfig:
     weak_information: float = 1000.0
     min_along_information: float = 100.0
     clear_information: float = 2500.0
-    refine_constrained: bool = False
+    refine_constrained: str = "off"
 
     def validate(self, prefix: str = "plane_refinement.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -139,6 +144,9 @@ class PlaneRefinementConfig:
         check_range(prefix + "weak_information", self.weak_information, 0.0, 1e12)
         check_range(prefix + "min_along_information", self.min_along_information, 0.0, 1e12)
         check_range(prefix + "clear_information", self.clear_information, 0.0, 1e12)
+        if self.refine_constrained not in REFINE_CONSTRAINED:
+            raise ValueError(f"{prefix}refine_constrained must be one of "
+                             f"{', '.join(REFINE_CONSTRAINED)}, got '{self.refine_constrained}'")
 
 
 @dataclass
