@@ -93,8 +93,8 @@ class PlaneRefinementConfig:
         refine_constrained: after the checks above, refine the registration by point-to-plane
             in the directions outside the degenerate subspace that it holds with at least
             ``clear_information`` (the planes of the checks, no extra nearest-neighbour
-            query): ``off`` (default), ``all`` (every such direction) or ``planar`` (only
-            base_link's forward, lateral and yaw motion).
+            query): ``off``, ``all`` (every such direction) or ``planar`` (only base_link's
+            forward, lateral and yaw motion; default).
         clear_information: a detected direction along which the refinement's information is
             at least this [1/m^2] is measured by the refined pose like a constrained one and
             removed from the degenerate subspace (default 2500: a 2 cm sigma, the configured
@@ -119,7 +119,7 @@ class PlaneRefinementConfig:
     weak_information: float = 1000.0
     min_along_information: float = 100.0
     clear_information: float = 2500.0
-    refine_constrained: str = "off"
+    refine_constrained: str = "planar"
 
     def validate(self, prefix: str = "plane_refinement.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
