@@ -599,10 +599,10 @@ class OdometryPipeline:
         that point-to-plane holds as well as a well-constrained one; ``pose`` itself when
         there are none.
 
-        The refinement runs in every direction outside the subspace; its information at the
-        result (where the residuals no longer carry the registration's offset) tells which
-        directions are held with at least ``clear_information``, and only the step's part
-        along those is kept (scaled twists); along the others the registration stays.
+        The refinement runs in all those directions at once; its information at the result
+        (where the residuals no longer carry the registration's offset) tells which of them
+        are held with at least ``clear_information``, and only the step's part along those is
+        kept (scaled twists); along the others the registration stays.
         """
         cfg = self.config.plane_refinement
         if not cfg.enabled or cfg.refine_constrained == "off":
