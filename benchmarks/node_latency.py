@@ -28,7 +28,6 @@ per scan, and the cores other processes used meanwhile. Targets: p99 at most 100
 from __future__ import annotations
 
 import argparse
-import os
 import resource
 import sys
 import time
@@ -39,7 +38,7 @@ from benchmarks._common import RESULTS, machine_info, write_results
 from benchmarks._pieces import (default_resolutions, format_resolution, parse_resolution,
                                 piece_bag, suite_resolutions, warm_file_cache)
 from benchmarks.faults import run_in_subprocess
-from benchmarks.speed import _cpu_busy_jiffies, _fmt, _other_load, _other_processes
+from benchmarks.speed import LoadMeter, _cpu_busy_jiffies, _fmt, _other_load, machine_load_lines
 from benchmarks.speed_resolutions import DEFAULT_DURATION, DEFAULT_SCENARIO, DEFAULT_START
 
 TARGET_P99_S = 0.100
@@ -98,11 +97,7 @@ def benchmark(bags: dict[str, Path], method: str = "lili", rate: float = 1.0,
               duration: float = DEFAULT_DURATION, timeout: float = 1800.0,
               progress: bool = True) -> dict[str, Any]:
     """One play run per bag (``{"ROWSxCOLS": bag}``), each in a fresh worker process."""
-    busy0, _ = _cpu_busy_jiffies()
-    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    load0 = os.getloadavg()
-    others0 = _other_processes()
-    t0 = time.monotonic()
+    meter = LoadMeter()
     rows: dict[str, Any] = {}
     for res, bag in bags.items():
         warm_file_cache(bag)
@@ -124,12 +119,9 @@ def benchmark(bags: dict[str, Path], method: str = "lili", rate: float = 1.0,
                   f"{row.get('dropped')}; latency p50 {_ms(row.get('latency_p50_s'))} / p99 "
                   f"{_ms(row.get('latency_p99_s'))} / max {_ms(row.get('latency_max_s'))} ms",
                   flush=True)
-    wall = time.monotonic() - t0
     return {"machine": machine_info(), "method": method, "rate": rate,
             "target_p99_s": TARGET_P99_S, "target_resolution": TARGET_RESOLUTION,
-            "load": {"loadavg_before": list(load0), "loadavg_after": list(os.getloadavg()),
-                     "wall_s": wall, "other_processes_cores": _other_load(busy0, ru0, wall),
-                     "other_processes_at_start": others0},
+            "load": meter.report(),
             "resolutions": rows}
 
 
@@ -153,17 +145,7 @@ def markdown(report: dict[str, Any], command: str) -> str:
         "the publication of its odometry, on the node's clock; p50 / p99 / max over its last "
         "1000 scans (here: every scan). The player runs on the same cores.",
         "",
-        f"Machine: {m['cpu']}, {m['cores']} cores, Python {m['python']}; commit `{m['commit']}`"
-        + (f" with uncommitted changes in "
-           f"{', '.join('`' + p + '`' for p in m['uncommitted_lili_odom'])}"
-           if m["uncommitted_lili_odom"] else "") + ".",
-        "",
-        f"Load: load average {load['loadavg_before'][0]:.2f} before, "
-        f"{load['loadavg_after'][0]:.2f} after; other processes used "
-        f"{load['other_processes_cores']:.2f} of {m['cores']} cores on average during the "
-        f"{load['wall_s'] / 60:.1f} min run"
-        + ("; busy at the start: " + "; ".join(f"`{p}`" for p in load["other_processes_at_start"])
-           if load["other_processes_at_start"] else "") + ".",
+        *machine_load_lines(m, load),
         "",
         "published: clouds in the piece; received: reached the node; dropped: pushed out of "
         "the node's queue (processing slower than the LiDAR); missing: lost before the node "

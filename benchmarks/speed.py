@@ -310,6 +310,44 @@ def _other_processes(min_cpu: float = 10.0, limit: int = 6) -> list[str]:
     return [r for _, r in sorted(rows, reverse=True)[:limit]]
 
 
+class LoadMeter:
+    """The machine's load while a benchmark runs: started at construction, read by
+    :meth:`report` (JSON-ready: load averages before / after, wall time [s], mean cores used
+    by other processes, the busiest other processes at the start)."""
+
+    def __init__(self) -> None:
+        self._busy0, _ = _cpu_busy_jiffies()
+        self._children0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        self._load0 = os.getloadavg()
+        self._others0 = _other_processes()
+        self._t0 = time.monotonic()
+
+    def report(self) -> dict:
+        wall = time.monotonic() - self._t0
+        return {"loadavg_before": list(self._load0), "loadavg_after": list(os.getloadavg()),
+                "wall_s": wall, "other_processes_cores": _other_load(self._busy0,
+                                                                     self._children0, wall),
+                "other_processes_at_start": self._others0}
+
+
+def machine_load_lines(m: dict, load: dict) -> list[str]:
+    """Markdown lines naming the machine and commit (``machine_info()``) and the load
+    (:meth:`LoadMeter.report`)."""
+    dirty = m["uncommitted_lili_odom"]
+    return [
+        f"Machine: {m['cpu']}, {m['cores']} cores, Python {m['python']}; commit `{m['commit']}`"
+        + (f" with uncommitted changes in {', '.join('`' + p + '`' for p in dirty)}"
+           if dirty else "") + ".",
+        "",
+        f"Load: load average {load['loadavg_before'][0]:.2f} before, "
+        f"{load['loadavg_after'][0]:.2f} after; other processes used "
+        f"{load['other_processes_cores']:.2f} of {m['cores']} cores on average during the "
+        f"{load['wall_s'] / 60:.1f} min run"
+        + ("; busy at the start: " + "; ".join(f"`{p}`" for p in load["other_processes_at_start"])
+           if load["other_processes_at_start"] else "") + ".",
+    ]
+
+
 # ----------------------------------------------------------------------------- driver
 
 def _run_in_fresh_process(bag: Path, method: str, start: float, scans: int, warmup: int,
@@ -359,11 +397,7 @@ def benchmark(bag: Path | str | dict, methods=METHODS, starts=(90.0, 5.0), scans
     each method is reported by its run with the median scans/s.
     """
     pieces = bag if isinstance(bag, dict) else {s: (Path(bag), s) for s in starts}
-    busy0, _ = _cpu_busy_jiffies()
-    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    load0 = os.getloadavg()
-    others0 = _other_processes()
-    t0 = time.monotonic()
+    meter = LoadMeter()
     windows = []
     for start in starts:
         runs: dict[str, list[dict]] = {m: [] for m in methods}
@@ -397,7 +431,6 @@ def benchmark(bag: Path | str | dict, methods=METHODS, starts=(90.0, 5.0), scans
                                          if kiss else None)
         windows.append({"start_s": float(start), "name": WINDOW_NAMES.get(float(start), ""),
                         "methods": res, "targets": _targets(res), "repeats": repeats})
-    wall = time.monotonic() - t0
     return {
         "bag": ", ".join(sorted({Path(b).name for b, _ in pieces.values()})),
         "scans": scans,
@@ -405,10 +438,7 @@ def benchmark(bag: Path | str | dict, methods=METHODS, starts=(90.0, 5.0), scans
         "methods": list(methods),
         "overrides": dict(overrides or {}),
         "machine": machine_info(),
-        "load": {"loadavg_before": list(load0), "loadavg_after": list(os.getloadavg()),
-                 "wall_s": wall,
-                 "other_processes_cores": _other_load(busy0, ru0, wall),
-                 "other_processes_at_start": others0},
+        "load": meter.report(),
         "windows": windows,
     }
 
@@ -473,16 +503,7 @@ def markdown(report: dict[str, Any], command: str) -> str:
                                                   for k, v in report["overrides"].items())
            + " instead of the defaults." if report.get("overrides") else ""),
         "",
-        f"Machine: {m['cpu']}, {m['cores']} cores, Python {m['python']}; commit `{m['commit']}`"
-        + (f" with uncommitted changes in {', '.join('`' + p + '`' for p in m['uncommitted_lili_odom'])}"
-           if m["uncommitted_lili_odom"] else "") + ".",
-        "",
-        f"Load: load average {load['loadavg_before'][0]:.2f} before, "
-        f"{load['loadavg_after'][0]:.2f} after; other processes used "
-        f"{load['other_processes_cores']:.2f} of {m['cores']} cores on average during the "
-        f"{load['wall_s'] / 60:.1f} min run"
-        + ("; busy at the start: " + "; ".join(f"`{p}`" for p in load["other_processes_at_start"])
-           if load["other_processes_at_start"] else "") + ".",
+        *machine_load_lines(m, load),
         "",
         "Cells: mean / p95 [ms per scan]. `deskew` includes the voxelisation; `total` = parse + "
         "all pipeline stages (for KISS-ICP: parse + `register_frame`). scans/s = timed scans / "

@@ -37,7 +37,6 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
-import os
 import resource
 import subprocess
 import sys
@@ -51,7 +50,8 @@ import numpy as np
 from benchmarks._common import RESULTS, ROOT, machine_info, write_results
 from benchmarks._pieces import (default_resolutions, format_resolution, parse_resolution,
                                 piece_bag, suite_resolutions, warm_file_cache)
-from benchmarks.speed import _cpu_busy_jiffies, _fmt, _other_load, _other_processes, _rss_mb
+from benchmarks.speed import (LoadMeter, _cpu_busy_jiffies, _fmt, _other_load, _rss_mb,
+                              machine_load_lines)
 from lili_odom.evaluation.timing import median_run
 
 METHODS = ("lili", "kiss")
@@ -191,11 +191,7 @@ def benchmark(bags: dict[str, Path], kind: str, repeats: int = 2, progress: bool
               ) -> dict[str, Any]:
     """Every method on every bag (``{"ROWSxCOLS": bag}``) ``repeats`` rounds, each run in a
     fresh process; the JSON-ready per-resolution results and the load."""
-    busy0, _ = _cpu_busy_jiffies()
-    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    load0 = os.getloadavg()
-    others0 = _other_processes()
-    t0 = time.monotonic()
+    meter = LoadMeter()
     rows: dict[str, Any] = {}
     for res, bag in bags.items():
         warm_file_cache(bag)
@@ -220,11 +216,8 @@ def benchmark(bags: dict[str, Path], kind: str, repeats: int = 2, progress: bool
         if progress:
             print(f"[{res}] lili / KISS-ICP: {rows[res]['ratio']:.2f}x (rounds "
                   + ", ".join(f"{x:.2f}" for x in rows[res]["rounds_ratio"]) + ")", flush=True)
-    wall = time.monotonic() - t0
     return {"machine": machine_info(), "repeats": repeats, "target_ratio": TARGET_RATIO,
-            "load": {"loadavg_before": list(load0), "loadavg_after": list(os.getloadavg()),
-                     "wall_s": wall, "other_processes_cores": _other_load(busy0, ru0, wall),
-                     "other_processes_at_start": others0},
+            "load": meter.report(),
             "resolutions": rows}
 
 
@@ -247,17 +240,7 @@ def markdown(report: dict[str, Any], command: str) -> str:
         "interpreter start-up and imports; the bag was read once before, so every run found it "
         "in the page cache.",
         "",
-        f"Machine: {m['cpu']}, {m['cores']} cores, Python {m['python']}; commit `{m['commit']}`"
-        + (f" with uncommitted changes in "
-           f"{', '.join('`' + p + '`' for p in m['uncommitted_lili_odom'])}"
-           if m["uncommitted_lili_odom"] else "") + ".",
-        "",
-        f"Load: load average {load['loadavg_before'][0]:.2f} before, "
-        f"{load['loadavg_after'][0]:.2f} after; other processes used "
-        f"{load['other_processes_cores']:.2f} of {m['cores']} cores on average during the "
-        f"{load['wall_s'] / 60:.1f} min run"
-        + ("; busy at the start: " + "; ".join(f"`{p}`" for p in load["other_processes_at_start"])
-           if load["other_processes_at_start"] else "") + ".",
+        *machine_load_lines(m, load),
         "",
         "Wall [s] and scans/s: median over the rounds. lili / KISS: `lili`'s wall time over "
         "KISS-ICP's within each round (in brackets), and their median. Peak RSS: largest over "

@@ -35,9 +35,10 @@ Inside a segment, a slip (the wheels over-read by tens of percent for a second) 
 before the segment is used: the segment is split into pieces of ``slip_piece_m`` of wheel
 travel, each piece's ratio is compared with the median piece's, and pieces off by more than
 ``slip_piece_ratio`` lose both their wheel and their LiDAR distance. Over a metre the
-registrations' endpoint errors move a piece's ratio by a few percent, a slip by 10-35 %. Without
-this, the first segments (before any estimate exists to gate them) carry a slip straight into
-the scale: one 1 s slip in the only segment seen before a tunnel sets the scale 5 % off.
+registrations' endpoint errors move a piece's ratio by a few percent, a slip by tens of
+percent. Without this, the first segments (before any estimate exists to gate them) carry a
+slip straight into the scale: 1 s of a 35 % over-read at 1 m/s in a 5 m segment raises its
+ratio by 7 %.
 
 Segments that disagree with the current estimate by more than the slip gate are not used
 (wheels spinning, bad registration); after ``max_rejections`` rejected segments in a row the
