@@ -11,12 +11,17 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-__all__ = ["DEFAULT_RESOLUTIONS", "format_resolution", "parse_resolution", "suite_resolutions",
-           "default_resolutions", "piece_bag", "warm_file_cache"]
+__all__ = ["DEFAULT_RESOLUTIONS", "DEFAULT_PIECE", "format_resolution", "parse_resolution",
+           "suite_resolutions", "default_resolutions", "piece_bag", "warm_file_cache",
+           "add_piece_arguments", "piece_bags", "piece_command"]
 
 #: Resolutions measured besides the suite's own: 32, 64 and 128 beams, 512 to 2048 columns.
 DEFAULT_RESOLUTIONS: tuple[tuple[int, int], ...] = (
     (32, 512), (32, 1024), (64, 1024), (64, 2048), (128, 1024), (128, 2048))
+
+
+#: The window the resolution benchmarks time by default: (scenario, start [s], duration [s]).
+DEFAULT_PIECE: tuple[str, float, float] = ("building", 0.0, 30.0)
 
 
 def format_resolution(resolution: tuple[int, int]) -> str:
@@ -78,3 +83,55 @@ def warm_file_cache(bag: Path | str, chunk: int = 1 << 24) -> int:
             while block := f.read(chunk):
                 total += len(block)
     return total
+
+
+def add_piece_arguments(ap) -> None:
+    """Add ``--scenario --start --duration --seed --resolutions`` (the window and the
+    resolutions a resolution benchmark measures) to the argparse parser ``ap``."""
+    scenario, start, duration = DEFAULT_PIECE
+    ap.add_argument("--scenario", default=scenario,
+                    help=f"scenario of the suite (default {scenario})")
+    ap.add_argument("--start", type=float, default=start,
+                    help=f"window start [s of the scenario's trial] (default {start:g})")
+    ap.add_argument("--duration", type=float, default=duration,
+                    help=f"window length [s] (default {duration:g})")
+    ap.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
+    ap.add_argument("--resolutions", nargs="+", metavar="ROWSxCOLS",
+                    help="default: " + " ".join(format_resolution(r) for r in DEFAULT_RESOLUTIONS)
+                    + " and every other resolution a scenario of the suite uses")
+
+
+def piece_bags(ap, args, progress: bool = True):
+    """The scenario and the cached bag per resolution (``{"RxC": path}``) that the arguments of
+    :func:`add_piece_arguments` name; a bad value ends the program through ``ap.error``."""
+    from lili_odom.suite.scenario import load_scenarios
+
+    if not args.duration > 0:
+        ap.error("--duration must be positive")
+    try:
+        resolutions = ([parse_resolution(r) for r in args.resolutions] if args.resolutions
+                       else default_resolutions())
+        (scenario,) = load_scenarios([args.scenario], measure=False)
+    except ValueError as exc:
+        ap.error(str(exc))
+    bags = {}
+    for res in resolutions:
+        if progress:
+            print(f"[{format_resolution(res)}] bag of {scenario.name} "
+                  f"{args.start:g}-{args.start + args.duration:g} s", flush=True)
+        bags[format_resolution(res)] = piece_bag(scenario.name, args.start, args.duration, res,
+                                                 args.seed, progress=progress)
+    return scenario, bags
+
+
+def piece_command(module: str, args, extra: str = "") -> str:
+    """The command line that reproduces a run: ``python -m MODULE`` with the piece options of
+    :func:`add_piece_arguments` that differ from their defaults, then ``extra``."""
+    scenario, start, duration = DEFAULT_PIECE
+    return (f"python -m {module}"
+            + (f" --scenario {args.scenario}" if args.scenario != scenario else "")
+            + (f" --start {args.start:g}" if args.start != start else "")
+            + (f" --duration {args.duration:g}" if args.duration != duration else "")
+            + (f" --seed {args.seed}" if args.seed else "")
+            + (" --resolutions " + " ".join(args.resolutions) if args.resolutions else "")
+            + extra)

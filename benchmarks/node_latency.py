@@ -35,11 +35,10 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks._common import RESULTS, machine_info, write_results
-from benchmarks._pieces import (default_resolutions, format_resolution, parse_resolution,
-                                piece_bag, suite_resolutions, warm_file_cache)
+from benchmarks._pieces import (DEFAULT_PIECE, add_piece_arguments, format_resolution,
+                                piece_bags, piece_command, suite_resolutions, warm_file_cache)
 from benchmarks.faults import run_in_subprocess
 from benchmarks.speed import LoadMeter, _cpu_busy_jiffies, _fmt, _other_load, machine_load_lines
-from benchmarks.speed_resolutions import DEFAULT_DURATION, DEFAULT_SCENARIO, DEFAULT_START
 
 TARGET_P99_S = 0.100
 TARGET_RESOLUTION = "128x1024"
@@ -55,7 +54,7 @@ FIRST_SCANS = 10
 
 
 def play_job(bag: Path, method: str = "lili", rate: float = 1.0,
-             duration: float = DEFAULT_DURATION) -> dict[str, Any]:
+             duration: float = DEFAULT_PIECE[2]) -> dict[str, Any]:
     """The :func:`benchmarks.faults.worker_play` job: ``bag`` at ``rate`` with stamps moved
     onto the system clock, no ``/clock``, the node with ``pipeline.method`` = ``method``."""
     return {"method": method, "rate": rate, "bag": str(bag),
@@ -94,7 +93,7 @@ def evaluate(row: dict[str, Any], resolution: str) -> dict[str, Any]:
 
 
 def benchmark(bags: dict[str, Path], method: str = "lili", rate: float = 1.0,
-              duration: float = DEFAULT_DURATION, timeout: float = 1800.0,
+              duration: float = DEFAULT_PIECE[2], timeout: float = 1800.0,
               progress: bool = True) -> dict[str, Any]:
     """One play run per bag (``{"ROWSxCOLS": bag}``), each in a fresh worker process."""
     meter = LoadMeter()
@@ -202,16 +201,7 @@ def markdown(report: dict[str, Any], command: str) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenario", default=DEFAULT_SCENARIO,
-                    help=f"scenario of the suite (default {DEFAULT_SCENARIO})")
-    ap.add_argument("--start", type=float, default=DEFAULT_START,
-                    help=f"window start [s of the scenario's trial] (default {DEFAULT_START:g})")
-    ap.add_argument("--duration", type=float, default=DEFAULT_DURATION,
-                    help=f"window length [s] (default {DEFAULT_DURATION:g})")
-    ap.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
-    ap.add_argument("--resolutions", nargs="+", metavar="ROWSxCOLS",
-                    help="default: 32x512 32x1024 64x1024 64x2048 128x1024 128x2048 and every "
-                    "other resolution a scenario of the suite uses")
+    add_piece_arguments(ap)
     ap.add_argument("--method", default="lili", choices=("lili", "zhang", "hessian", "none"))
     ap.add_argument("--rate", type=float, default=1.0, help="play rate (default 1: 10 Hz)")
     ap.add_argument("--timeout", type=float, default=1800.0, help="per run [s]")
@@ -221,37 +211,20 @@ def main(argv=None) -> int:
                     help="file name of the results without .md/.json (default node_latency)")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
-    if not args.duration > 0 or not args.rate > 0:
-        ap.error("--duration and --rate must be positive")
-    try:
-        resolutions = ([parse_resolution(r) for r in args.resolutions] if args.resolutions
-                       else default_resolutions())
-    except ValueError as exc:
-        ap.error(str(exc))
-    from lili_odom.suite.scenario import load_scenarios
-
-    try:
-        (scenario,) = load_scenarios([args.scenario], measure=False)
-    except ValueError as exc:
-        ap.error(str(exc))
-    bags = {format_resolution(res): piece_bag(scenario.name, args.start, args.duration, res,
-                                              args.seed, progress=not args.no_progress)
-            for res in resolutions}
+    if not args.rate > 0:
+        ap.error("--rate must be positive")
+    scenario, bags = piece_bags(ap, args, progress=not args.no_progress)
     report = benchmark(bags, args.method, args.rate, args.duration, args.timeout,
                        progress=not args.no_progress)
     report["piece"] = {"scenario": scenario.name, "start_s": args.start,
                        "duration_s": args.duration, "seed": args.seed}
     report["suite_resolutions"] = {format_resolution(r): names
                                    for r, names in suite_resolutions().items()}
-    command = ("python -m benchmarks.node_latency"
-               + (f" --scenario {args.scenario}" if args.scenario != DEFAULT_SCENARIO else "")
-               + (f" --start {args.start:g}" if args.start != DEFAULT_START else "")
-               + (f" --duration {args.duration:g}" if args.duration != DEFAULT_DURATION else "")
-               + (f" --seed {args.seed}" if args.seed else "")
-               + (" --resolutions " + " ".join(args.resolutions) if args.resolutions else "")
-               + (f" --method {args.method}" if args.method != "lili" else "")
-               + (f" --rate {args.rate:g}" if args.rate != 1.0 else "")
-               + (f" --name {args.name}" if args.name != "node_latency" else ""))
+    command = piece_command(
+        "benchmarks.node_latency", args,
+        (f" --method {args.method}" if args.method != "lili" else "")
+        + (f" --rate {args.rate:g}" if args.rate != 1.0 else "")
+        + (f" --name {args.name}" if args.name != "node_latency" else ""))
     path = write_results(args.out, args.name, markdown(report, command), report)
     print(f"wrote {path}")
     return 0

@@ -48,15 +48,14 @@ from typing import Any
 import numpy as np
 
 from benchmarks._common import RESULTS, ROOT, machine_info, write_results
-from benchmarks._pieces import (default_resolutions, format_resolution, parse_resolution,
-                                piece_bag, suite_resolutions, warm_file_cache)
+from benchmarks._pieces import (add_piece_arguments, format_resolution, piece_bags,
+                                piece_command, suite_resolutions, warm_file_cache)
 from benchmarks.speed import (LoadMeter, _cpu_busy_jiffies, _fmt, _other_load, _rss_mb,
                               machine_load_lines)
 from lili_odom.evaluation.timing import median_run
 
 METHODS = ("lili", "kiss")
 TARGET_RATIO = 1.5
-DEFAULT_SCENARIO, DEFAULT_START, DEFAULT_DURATION = "building", 0.0, 30.0
 #: Stages of the pipeline in the order of its per-scan work (metrics.json ``timings_mean_s``).
 STAGE_ORDER = ("predict", "deskew", "icp", "detector", "refine", "remap", "fusion", "map",
                "total")
@@ -295,16 +294,7 @@ def markdown(report: dict[str, Any], command: str) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenario", default=DEFAULT_SCENARIO,
-                    help=f"scenario of the suite (default {DEFAULT_SCENARIO})")
-    ap.add_argument("--start", type=float, default=DEFAULT_START,
-                    help=f"window start [s of the scenario's trial] (default {DEFAULT_START:g})")
-    ap.add_argument("--duration", type=float, default=DEFAULT_DURATION,
-                    help=f"window length [s] (default {DEFAULT_DURATION:g})")
-    ap.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
-    ap.add_argument("--resolutions", nargs="+", metavar="ROWSxCOLS",
-                    help="default: 32x512 32x1024 64x1024 64x2048 128x1024 128x2048 and every "
-                    "other resolution a scenario of the suite uses")
+    add_piece_arguments(ap)
     ap.add_argument("--repeats", type=int, default=2, help="rounds (default 2)")
     ap.add_argument("--out", type=Path, default=RESULTS,
                     help="directory for the results (default benchmarks/results)")
@@ -323,40 +313,17 @@ def main(argv=None) -> int:
         return 0
     if args.repeats < 1:
         ap.error("--repeats must be at least 1")
-    if not args.duration > 0:
-        ap.error("--duration must be positive")
-    try:
-        resolutions = ([parse_resolution(r) for r in args.resolutions] if args.resolutions
-                       else default_resolutions())
-    except ValueError as exc:
-        ap.error(str(exc))
-    from lili_odom.suite.scenario import load_scenarios
-
-    try:
-        (scenario,) = load_scenarios([args.scenario], measure=False)
-    except ValueError as exc:
-        ap.error(str(exc))
-    bags = {}
-    for res in resolutions:
-        if not args.no_progress:
-            print(f"[{format_resolution(res)}] bag of {scenario.name} "
-                  f"{args.start:g}-{args.start + args.duration:g} s", flush=True)
-        bags[format_resolution(res)] = piece_bag(scenario.name, args.start, args.duration, res,
-                                                 args.seed, progress=not args.no_progress)
+    scenario, bags = piece_bags(ap, args, progress=not args.no_progress)
     report = benchmark(bags, scenario.kind, repeats=args.repeats,
                        progress=not args.no_progress)
     report["piece"] = {"scenario": scenario.name, "kind": scenario.kind,
                        "start_s": args.start, "duration_s": args.duration, "seed": args.seed}
     report["suite_resolutions"] = {format_resolution(r): names
                                    for r, names in suite_resolutions().items()}
-    command = ("python -m benchmarks.speed_resolutions"
-               + (f" --scenario {args.scenario}" if args.scenario != DEFAULT_SCENARIO else "")
-               + (f" --start {args.start:g}" if args.start != DEFAULT_START else "")
-               + (f" --duration {args.duration:g}" if args.duration != DEFAULT_DURATION else "")
-               + (f" --seed {args.seed}" if args.seed else "")
-               + (" --resolutions " + " ".join(args.resolutions) if args.resolutions else "")
-               + (f" --repeats {args.repeats}" if args.repeats != 2 else "")
-               + (f" --name {args.name}" if args.name != "speed_resolutions" else ""))
+    command = piece_command(
+        "benchmarks.speed_resolutions", args,
+        (f" --repeats {args.repeats}" if args.repeats != 2 else "")
+        + (f" --name {args.name}" if args.name != "speed_resolutions" else ""))
     path = write_results(args.out, args.name, markdown(report, command), report)
     print(f"wrote {path}")
     return 0

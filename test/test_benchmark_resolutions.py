@@ -6,8 +6,9 @@ import pytest
 
 from benchmarks import node_latency as nl
 from benchmarks import speed_resolutions as sr
-from benchmarks._pieces import (DEFAULT_RESOLUTIONS, default_resolutions, format_resolution,
-                                parse_resolution, suite_resolutions)
+from benchmarks._pieces import (DEFAULT_RESOLUTIONS, add_piece_arguments, default_resolutions,
+                                format_resolution, parse_resolution, piece_command,
+                                suite_resolutions)
 
 MACHINE = {"cpu": "test CPU", "cores": 2, "python": "3.11", "commit": "abc1234",
            "uncommitted_lili_odom": []}
@@ -30,6 +31,22 @@ def test_default_resolutions_cover_the_suite_and_the_ouster_modes():
     assert parse_resolution("64x2048") == (64, 2048) and format_resolution((64, 2048)) == "64x2048"
     with pytest.raises(ValueError):
         parse_resolution("64-2048")
+
+
+def test_piece_options_and_the_command_that_reproduces_them():
+    import argparse
+
+    ap = argparse.ArgumentParser()
+    add_piece_arguments(ap)
+    defaults = ap.parse_args([])
+    assert (defaults.scenario, defaults.start, defaults.duration, defaults.seed) == (
+        "building", 0.0, 30.0, 0)
+    assert piece_command("benchmarks.x", defaults) == "python -m benchmarks.x"
+    args = ap.parse_args(["--scenario", "mine", "--start", "5", "--duration", "12.5",
+                          "--seed", "2", "--resolutions", "32x512", "64x1024"])
+    assert piece_command("benchmarks.x", args, " --rate 2") == (
+        "python -m benchmarks.x --scenario mine --start 5 --duration 12.5 --seed 2"
+        " --resolutions 32x512 64x1024 --rate 2")
 
 
 def test_rounds_alternate_which_method_goes_first():
