@@ -102,8 +102,10 @@ from lili_odom.fusion.factors import (
 )
 from lili_odom.fusion.imu import (
     ImuBuffer,
+    euler_correction,
     gravity_alignment,
     integrate,
+    lever_arm_in_imu,
     make_preintegration_params,
 )
 from lili_odom.fusion.measurements import (
@@ -256,6 +258,8 @@ class FusionEstimator:
         self._gravity_tilt = np.zeros(2)  # gravity_tracking_gain: rad about odom x, y
         self._tilt_difference = np.zeros(2)  # averaged registration - fused tilt [rad]
         self._params = make_preintegration_params(cfg.imu, self.T_base_imu)
+        self._lever_arm = (lever_arm_in_imu(self.T_base_imu)
+                           if cfg.imu.compensate_angular_acceleration else None)
         self._isam: gtsam.ISAM2 | None = None
         self._state: _State | None = None
         self._since_reset = 0
@@ -583,7 +587,7 @@ class FusionEstimator:
         if allow_imu and cfg.use_imu and dt <= cfg.max_interval_s:
             pim = gtsam.PreintegratedCombinedMeasurements(self._params, prev.bias)
             rep = integrate(self.imu, pim, prev.t, t, cfg.imu.max_gap_s,
-                            cfg.imu.max_extrapolation_s)
+                            cfg.imu.max_extrapolation_s, self._lever_arm)
             used_imu = rep.covered
             if not used_imu:
                 notes.append(f"no IMU: {rep.reason}")
@@ -948,7 +952,7 @@ class FusionEstimator:
         if cfg.use_imu and t_max - s.t <= cfg.max_interval_s:
             probe = gtsam.PreintegratedCombinedMeasurements(self._params, s.bias)
             covered = integrate(self.imu, probe, s.t, t_max, cfg.imu.max_gap_s,
-                                cfg.imu.max_extrapolation_s).covered
+                                cfg.imu.max_extrapolation_s, self._lever_arm).covered
         if covered:
             nav0 = gtsam.NavState(s.pose, s.velocity)
             knots = self.imu.knots(s.t, t_max, cfg.imu.max_extrapolation_s)
@@ -962,8 +966,7 @@ class FusionEstimator:
                 while j + 1 < len(knots) and kt[j + 1] <= tq:
                     tn, an, gn = knots[j + 1]
                     if tn > t_cur:
-                        pim.integrateMeasurement(0.5 * (acc_cur + an), 0.5 * (gyr_cur + gn),
-                                                 tn - t_cur)
+                        self._integrate_piece(pim, acc_cur, an, gyr_cur, gn, tn - t_cur)
                     t_cur, acc_cur, gyr_cur = tn, an, gn
                     j += 1
                 if tq > t_cur:
@@ -971,8 +974,7 @@ class FusionEstimator:
                     tb, ab, gb = knots[min(j + 1, len(knots) - 1)]
                     w = 0.0 if tb <= ta else (tq - ta) / (tb - ta)
                     aq, gq = (1 - w) * aa + w * ab, (1 - w) * ga + w * gb
-                    pim.integrateMeasurement(0.5 * (acc_cur + aq), 0.5 * (gyr_cur + gq),
-                                             tq - t_cur)
+                    self._integrate_piece(pim, acc_cur, aq, gyr_cur, gq, tq - t_cur)
                     t_cur, acc_cur, gyr_cur = tq, aq, gq
                 out[k] = matrix(pim.predict(nav0, s.bias).pose())
             return out
@@ -983,6 +985,15 @@ class FusionEstimator:
                 delta = exp(self._body_rate * (tq - s.t))
             out[k] = T_last @ delta
         return out
+
+    def _integrate_piece(self, pim: gtsam.PreintegratedCombinedMeasurements, acc_a: np.ndarray,
+                         acc_b: np.ndarray, gyr_a: np.ndarray, gyr_b: np.ndarray,
+                         dt: float) -> None:
+        """One piece between two IMU knots, as :func:`lili_odom.fusion.imu.integrate` does."""
+        acc = 0.5 * (acc_a + acc_b)
+        if self._lever_arm is not None:
+            acc = acc - euler_correction(gyr_a, gyr_b, dt, self._lever_arm)
+        pim.integrateMeasurement(acc, 0.5 * (gyr_a + gyr_b), dt)
 
     def _interpolate_history(self, t: float) -> np.ndarray:
         hist = list(self._history)

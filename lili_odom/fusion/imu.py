@@ -8,8 +8,12 @@ Frames and units:
 * The estimator's *body* is ``base_link``. The IMU -> body extrinsic ``T_base_imu`` (pose of
   ``os_imu`` in ``base_link``) is handed to GTSAM as ``body_P_sensor``: GTSAM then rotates each
   bias-corrected measurement into the body frame and removes the centripetal acceleration of
-  the lever arm (it neglects the angular-acceleration term, which is tiny for a Husky). The
-  bias states therefore live in the **IMU frame**.
+  the lever arm. GTSAM neglects the lever arm's angular-acceleration (Euler) term
+  ``alpha x r``; with the OS1 on a mast about 0.65 m above ``base_link``, a skid-steer robot
+  rocking over a rough floor sees metres per second squared of it, which a LiDAR-held pose
+  then trades against the IMU's prediction. :func:`integrate` removes it before GTSAM sees a
+  sample (``compensate_angular_acceleration``, :func:`euler_correction`). The bias states
+  live in the **IMU frame**.
 * The world (odometry) frame is gravity-aligned: gravity is ``-g`` along its z axis
   (``PreintegrationCombinedParams.MakeSharedU``).
 """
@@ -34,6 +38,8 @@ __all__ = [
     "make_preintegration_params",
     "integrate",
     "gravity_alignment",
+    "lever_arm_in_imu",
+    "euler_correction",
 ]
 
 STANDARD_GRAVITY = 9.80665
@@ -65,6 +71,9 @@ class ImuNoiseConfig:
             corrupt (the ICM-20948 saturates at 16 g = 157 m/s^2).
         max_abs_gyro: samples with a larger rate component [rad/s] are rejected (the sensor
             saturates at 2000 deg/s = 34.9 rad/s).
+        compensate_angular_acceleration: remove the lever arm's angular-acceleration term
+            from the specific force before preintegration (:func:`euler_correction`);
+            default True.
     """
 
     accel_noise_density: float = 1.0e-2
@@ -80,6 +89,7 @@ class ImuNoiseConfig:
     buffer_seconds: float = 30.0
     max_abs_acc: float = 160.0
     max_abs_gyro: float = 35.0
+    compensate_angular_acceleration: bool = True
 
     def validate(self, prefix: str = "imu.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -125,6 +135,27 @@ def make_preintegration_params(
     if T_base_imu is not None and not np.allclose(T_base_imu, np.eye(4)):
         p.setBodyPSensor(pose3(T_base_imu))
     return p
+
+
+def lever_arm_in_imu(T_base_imu: np.ndarray | None) -> np.ndarray | None:
+    """The IMU's offset from the ``base_link`` origin, expressed in the IMU frame [m]
+    (``R_base_imu^T p_base_imu``); None when it is zero (no Euler term to remove)."""
+    if T_base_imu is None:
+        return None
+    T = np.asarray(T_base_imu, dtype=float)
+    r = T[:3, :3].T @ T[:3, 3]
+    return r if np.any(r) else None
+
+
+def euler_correction(gyro_a: np.ndarray, gyro_b: np.ndarray, dt: float,
+                     lever_arm: np.ndarray) -> np.ndarray:
+    """The specific force [m/s^2, IMU frame] the lever arm's angular acceleration adds at the
+    IMU between two gyro knots ``dt`` [s] apart: ``alpha x r`` with ``alpha`` the slope of the
+    piecewise-linear rate (``(gyro_b - gyro_a) / dt``, IMU frame [rad/s^2]) and ``r`` the
+    lever arm in the IMU frame (:func:`lever_arm_in_imu`). Summed over an interval its
+    integral telescopes to ``(w_end - w_start) x r``, so gyro noise does not accumulate and
+    a constant gyro bias cancels."""
+    return np.cross((np.asarray(gyro_b) - np.asarray(gyro_a)) / dt, lever_arm)
 
 
 class ImuSample(NamedTuple):
@@ -342,11 +373,13 @@ def integrate(
     t1: float,
     max_gap_s: float,
     max_extrapolation_s: float,
+    lever_arm: np.ndarray | None = None,
 ) -> IntegrationReport:
     """Integrate the buffer's samples over [t0, t1] into ``pim``.
 
     Each piece between consecutive knots is integrated with the mean of its end values
-    (exact for piecewise-linear signals). The interval counts as covered when the ends can be
+    (exact for piecewise-linear signals), minus :func:`euler_correction` when ``lever_arm``
+    (IMU frame [m]) is given. The interval counts as covered when the ends can be
     interpolated (or held for at most ``max_extrapolation_s``) and no hole between samples
     exceeds ``max_gap_s``; otherwise nothing is integrated.
     """
@@ -368,7 +401,10 @@ def integrate(
         dt = tb - ta
         if dt <= 0.0:
             continue
-        pim.integrateMeasurement(0.5 * (aa + ab), 0.5 * (ga + gb), dt)
+        acc = 0.5 * (aa + ab)
+        if lever_arm is not None:
+            acc = acc - euler_correction(ga, gb, dt, lever_arm)
+        pim.integrateMeasurement(acc, 0.5 * (ga + gb), dt)
         rep.n_segments += 1
         rep.integrated_s += dt
     rep.covered = rep.n_segments > 0
