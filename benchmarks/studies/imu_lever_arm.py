@@ -1,0 +1,139 @@
+"""How far the fused pose strays from the registration on a rough floor, per IMU model.
+
+    python -m benchmarks.studies.imu_lever_arm                 # ramp_drift, 0-18 s, 32x512
+    python -m benchmarks.studies.imu_lever_arm --scenario mine --duration 20
+
+Runs ``none`` (no detector, so every registration is fully trusted) over a window of a suite
+scenario (simulated with the suite's scenario code, see :mod:`benchmarks._pieces`) once per
+setting and compares, scan by scan, against the simulator's truth of ``base_link``:
+
+* the raw registration (``OdometryOutput.icp_pose``) and the fused pose, each aligned to the
+  truth in SE(3), as RMS errors along the truth's forward, lateral and up axes [m];
+* where the fused pose is farther from the truth than the registrations it was given, the
+  IMU's preintegrated motion pulled it away from them.
+
+Settings: ``euler`` (the defaults: the lever arm's angular-acceleration term removed,
+:func:`lili_odom.fusion.imu.euler_correction`), ``gtsam_only`` (GTSAM's own lever-arm
+correction, centripetal term only) and ``no_imu`` (the fallback motion model instead of the
+IMU). Writes ``benchmarks/results/imu_lever_arm.{md,json}``.
+"""
+from __future__ import annotations
+
+import argparse
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+from benchmarks._common import RESULTS, config_with, machine_info, write_results
+from benchmarks._pieces import format_resolution, parse_resolution, piece_bag
+
+#: Settings compared (overrides below ``pipeline.``).
+SETTINGS = {
+    "euler": {},
+    "gtsam_only": {"fusion.imu.compensate_angular_acceleration": False},
+    "no_imu": {"fusion.use_imu": False},
+}
+
+
+def run_setting(job: tuple) -> dict:
+    """Run ``none`` over the bag with one setting; (stamp, fused, registration) base poses and
+    the truth."""
+    bag, overrides = job
+    from lili_odom.bagio.reader import BagReader
+    from lili_odom.evaluation.replay import Replay
+
+    config = config_with({"method": "none", **overrides}, prog="imu_lever_arm")
+    topics = [config.lidar_topic, config.imu_topic, config.wheel_topic,
+              config.ground_truth_topic, "/tf_static"]
+    outs: list[tuple[float, np.ndarray, np.ndarray]] = []
+
+    def record(out, _pipeline) -> None:
+        if out.icp_pose is not None:
+            outs.append((out.stamp, out.pose, out.icp_pose))
+
+    with BagReader(bag, topics=topics, required=[config.lidar_topic]) as reader:
+        replay = Replay(config, on_output=record).run(reader)
+    return {"outs": outs, "truth": replay.truth}
+
+
+def body_errors(stamps: np.ndarray, poses: np.ndarray, truth: list) -> np.ndarray:
+    """RMS position error [m] along the truth's forward, lateral and up axes after an SE(3)
+    alignment of ``poses`` (n, 4, 4) to the truth at ``stamps`` (nearest truth sample)."""
+    from evo.core.geometry import umeyama_alignment
+
+    ts = np.array([s for s, _ in truth])
+    k = np.clip(np.searchsorted(ts, stamps), 1, len(ts) - 1)
+    k = np.where(np.abs(ts[k] - stamps) < np.abs(ts[k - 1] - stamps), k, k - 1)
+    T = np.array([truth[i][1] for i in k])
+    r, t, _ = umeyama_alignment(poses[:, :3, 3].T, T[:, :3, 3].T, False)
+    d = poses[:, :3, 3] @ r.T + t - T[:, :3, 3]
+    body = np.einsum("nji,nj->ni", T[:, :3, :3], d)
+    return np.sqrt((body ** 2).mean(axis=0))
+
+
+def summarise(result: dict) -> dict:
+    stamps = np.array([s for s, _, _ in result["outs"]])
+    fused = np.array([P for _, P, _ in result["outs"]])
+    icp = np.array([P for _, _, P in result["outs"]])
+    return {"scans": len(stamps),
+            "fused_rms_m": body_errors(stamps, fused, result["truth"]).tolist(),
+            "registration_rms_m": body_errors(stamps, icp, result["truth"]).tolist()}
+
+
+def markdown(report: dict, command: str) -> str:
+    p = report["piece"]
+    lines = [
+        "# IMU lever arm: fused pose against its registrations on a rough floor", "",
+        f"`{command}`: `none` over `{p['scenario']}` (seed {p['seed']}) from {p['start_s']:g} s "
+        f"for {p['duration_s']:g} s at {p['resolution']}, once per IMU model. RMS position error "
+        "[m] along the true forward / lateral / up axes after an SE(3) alignment to the truth, "
+        "for the fused pose and for the raw registration it was given "
+        "(`benchmarks/studies/imu_lever_arm.py`).", "",
+        f"Commit `{report['machine']['commit']}`.", "",
+        "| setting | scans | fused fwd | fused lat | fused up | registration fwd | "
+        "registration lat | registration up |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for name, row in report["settings"].items():
+        f, r = row["fused_rms_m"], row["registration_rms_m"]
+        lines.append(f"| `{name}` | {row['scans']} | " + " | ".join(f"{v:.3f}" for v in f)
+                     + " | " + " | ".join(f"{v:.3f}" for v in r) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", default="ramp_drift")
+    ap.add_argument("--start", type=float, default=0.0, help="window start [s of the trial]")
+    ap.add_argument("--duration", type=float, default=18.0, help="window length [s]")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--resolution", default="32x512", help="ROWSxCOLS (default 32x512)")
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--out", default=RESULTS)
+    args = ap.parse_args(argv)
+    if not args.duration > 0:
+        ap.error("--duration must be positive")
+    try:
+        res = parse_resolution(args.resolution)
+        bag = piece_bag(args.scenario, args.start, args.duration, res, args.seed)
+    except ValueError as exc:
+        ap.error(str(exc))
+    with ProcessPoolExecutor(max(1, args.jobs)) as pool:
+        results = list(pool.map(run_setting, [(bag, o) for o in SETTINGS.values()]))
+    report = {"piece": {"scenario": args.scenario, "start_s": args.start,
+                        "duration_s": args.duration, "seed": args.seed,
+                        "resolution": format_resolution(res)},
+              "machine": machine_info(),
+              "settings": {n: summarise(r) for n, r in zip(SETTINGS, results)}}
+    command = ("python -m benchmarks.studies.imu_lever_arm"
+               + (f" --scenario {args.scenario}" if args.scenario != "ramp_drift" else "")
+               + (f" --start {args.start:g}" if args.start else "")
+               + (f" --duration {args.duration:g}" if args.duration != 18.0 else "")
+               + (f" --seed {args.seed}" if args.seed else "")
+               + (f" --resolution {args.resolution}" if args.resolution != "32x512" else ""))
+    print(f"wrote {write_results(args.out, 'imu_lever_arm', markdown(report, command), report)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
