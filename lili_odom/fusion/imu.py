@@ -10,7 +10,7 @@ Frames and units:
   bias-corrected measurement into the body frame and removes the centripetal acceleration of
   the lever arm. GTSAM neglects the lever arm's angular-acceleration (Euler) term
   ``alpha x r``; with the OS1 on a mast about 0.65 m above ``base_link``, a skid-steer robot
-  rocking over a rough floor sees metres per second squared of it, which a LiDAR-held pose
+  rocking over a rough floor sees up to about 1 m/s^2 of it, which a LiDAR-held pose
   then trades against the IMU's prediction. :func:`integrate` removes it before GTSAM sees a
   sample (``compensate_angular_acceleration``, :func:`euler_correction`). The bias states
   live in the **IMU frame**.

@@ -203,7 +203,7 @@ def _planes(reference: ReferenceMap, q: np.ndarray, k: int, max_dist: float,
     nb = pts[idx[valid]]  # (m, k, 3)
     c = nb.mean(axis=1)
     d = nb - c[:, None, :]
-    cov = (d.transpose(0, 2, 1) @ d) / k  # (m, 3, 3); a batched matmul, not einsum: ~8x faster
+    cov = (d.transpose(0, 2, 1) @ d) / k  # (m, 3, 3) neighbourhood covariances
     w, v = np.linalg.eigh(cov)  # ascending
     planarity = (w[:, 1] - w[:, 0]) / np.maximum(w[:, 2], 1e-12)
     good = planarity >= min_planarity
