@@ -56,19 +56,14 @@ def run_setting(job: tuple) -> dict:
     return {"outs": outs, "truth": replay.truth}
 
 
-def body_errors(stamps: np.ndarray, poses: np.ndarray, truth: list) -> np.ndarray:
+def body_rms(stamps: np.ndarray, poses: np.ndarray, truth: list) -> list[float]:
     """RMS position error [m] along the truth's forward, lateral and up axes after an SE(3)
-    alignment of ``poses`` (n, 4, 4) to the truth at ``stamps`` (nearest truth sample)."""
-    from evo.core.geometry import umeyama_alignment
+    alignment of ``poses`` (n, 4, 4) at ``stamps`` to the truth (as for the ATE)."""
+    from lili_odom.evaluation.metrics import body_frame_errors
 
-    ts = np.array([s for s, _ in truth])
-    k = np.clip(np.searchsorted(ts, stamps), 1, len(ts) - 1)
-    k = np.where(np.abs(ts[k] - stamps) < np.abs(ts[k - 1] - stamps), k, k - 1)
-    T = np.array([truth[i][1] for i in k])
-    r, t, _ = umeyama_alignment(poses[:, :3, 3].T, T[:, :3, 3].T, False)
-    d = poses[:, :3, 3] @ r.T + t - T[:, :3, 3]
-    body = np.einsum("nji,nj->ni", T[:, :3, :3], d)
-    return np.sqrt((body ** 2).mean(axis=0))
+    err = body_frame_errors(stamps, poses, np.array([s for s, _ in truth]),
+                            np.array([T for _, T in truth]))
+    return np.sqrt((err ** 2).mean(axis=0)).tolist()
 
 
 def summarise(result: dict) -> dict:
@@ -76,8 +71,8 @@ def summarise(result: dict) -> dict:
     fused = np.array([P for _, P, _ in result["outs"]])
     icp = np.array([P for _, _, P in result["outs"]])
     return {"scans": len(stamps),
-            "fused_rms_m": body_errors(stamps, fused, result["truth"]).tolist(),
-            "registration_rms_m": body_errors(stamps, icp, result["truth"]).tolist()}
+            "fused_rms_m": body_rms(stamps, fused, result["truth"]),
+            "registration_rms_m": body_rms(stamps, icp, result["truth"])}
 
 
 def markdown(report: dict, command: str) -> str:

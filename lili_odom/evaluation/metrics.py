@@ -66,14 +66,31 @@ def evaluate(est_stamps: np.ndarray, est_poses: np.ndarray, ref_stamps: np.ndarr
     )
 
 
-def error_along_path(est_stamps: np.ndarray, est_poses: np.ndarray, ref_stamps: np.ndarray,
-                     ref_poses: np.ndarray, max_dt: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
-    """Position error [m] of the SE(3)-aligned estimate (as for the ATE) against the distance
-    travelled along the truth [m], one value per matched pose."""
+def _aligned(est_stamps: np.ndarray, est_poses: np.ndarray, ref_stamps: np.ndarray,
+             ref_poses: np.ndarray, max_dt: float):
+    """evo's (reference, estimate) associated within ``max_dt`` [s], the estimate SE(3)-aligned
+    to the reference as for the ATE."""
     from evo.core import sync
 
     ref, est = sync.associate_trajectories(_traj(ref_stamps, ref_poses), _traj(est_stamps, est_poses),
                                            max_diff=max_dt)
     est.align(ref, correct_scale=False)
+    return ref, est
+
+
+def error_along_path(est_stamps: np.ndarray, est_poses: np.ndarray, ref_stamps: np.ndarray,
+                     ref_poses: np.ndarray, max_dt: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
+    """Position error [m] of the SE(3)-aligned estimate (as for the ATE) against the distance
+    travelled along the truth [m], one value per matched pose."""
+    ref, est = _aligned(est_stamps, est_poses, ref_stamps, ref_poses, max_dt)
     return (np.asarray(ref.distances, dtype=float),
             np.linalg.norm(est.positions_xyz - ref.positions_xyz, axis=1))
+
+
+def body_frame_errors(est_stamps: np.ndarray, est_poses: np.ndarray, ref_stamps: np.ndarray,
+                      ref_poses: np.ndarray, max_dt: float = 0.02) -> np.ndarray:
+    """(n, 3) position error [m] of the SE(3)-aligned estimate (as for the ATE) along the
+    reference's own forward, lateral and up axes, one row per matched pose."""
+    ref, est = _aligned(est_stamps, est_poses, ref_stamps, ref_poses, max_dt)
+    R = np.array([T[:3, :3] for T in ref.poses_se3])
+    return np.einsum("nji,nj->ni", R, est.positions_xyz - ref.positions_xyz)

@@ -102,9 +102,9 @@ from lili_odom.fusion.factors import (
 )
 from lili_odom.fusion.imu import (
     ImuBuffer,
-    euler_correction,
     gravity_alignment,
     integrate,
+    integrate_piece,
     lever_arm_in_imu,
     make_preintegration_params,
 )
@@ -966,7 +966,8 @@ class FusionEstimator:
                 while j + 1 < len(knots) and kt[j + 1] <= tq:
                     tn, an, gn = knots[j + 1]
                     if tn > t_cur:
-                        self._integrate_piece(pim, acc_cur, an, gyr_cur, gn, tn - t_cur)
+                        integrate_piece(pim, acc_cur, an, gyr_cur, gn, tn - t_cur,
+                                        self._lever_arm)
                     t_cur, acc_cur, gyr_cur = tn, an, gn
                     j += 1
                 if tq > t_cur:
@@ -974,7 +975,7 @@ class FusionEstimator:
                     tb, ab, gb = knots[min(j + 1, len(knots) - 1)]
                     w = 0.0 if tb <= ta else (tq - ta) / (tb - ta)
                     aq, gq = (1 - w) * aa + w * ab, (1 - w) * ga + w * gb
-                    self._integrate_piece(pim, acc_cur, aq, gyr_cur, gq, tq - t_cur)
+                    integrate_piece(pim, acc_cur, aq, gyr_cur, gq, tq - t_cur, self._lever_arm)
                     t_cur, acc_cur, gyr_cur = tq, aq, gq
                 out[k] = matrix(pim.predict(nav0, s.bias).pose())
             return out
@@ -985,15 +986,6 @@ class FusionEstimator:
                 delta = exp(self._body_rate * (tq - s.t))
             out[k] = T_last @ delta
         return out
-
-    def _integrate_piece(self, pim: gtsam.PreintegratedCombinedMeasurements, acc_a: np.ndarray,
-                         acc_b: np.ndarray, gyr_a: np.ndarray, gyr_b: np.ndarray,
-                         dt: float) -> None:
-        """One piece between two IMU knots, as :func:`lili_odom.fusion.imu.integrate` does."""
-        acc = 0.5 * (acc_a + acc_b)
-        if self._lever_arm is not None:
-            acc = acc - euler_correction(gyr_a, gyr_b, dt, self._lever_arm)
-        pim.integrateMeasurement(acc, 0.5 * (gyr_a + gyr_b), dt)
 
     def _interpolate_history(self, t: float) -> np.ndarray:
         hist = list(self._history)

@@ -40,6 +40,7 @@ __all__ = [
     "gravity_alignment",
     "lever_arm_in_imu",
     "euler_correction",
+    "integrate_piece",
 ]
 
 STANDARD_GRAVITY = 9.80665
@@ -155,7 +156,22 @@ def euler_correction(gyro_a: np.ndarray, gyro_b: np.ndarray, dt: float,
     lever arm in the IMU frame (:func:`lever_arm_in_imu`). Summed over an interval its
     integral telescopes to ``(w_end - w_start) x r``, so gyro noise does not accumulate and
     a constant gyro bias cancels."""
-    return np.cross((np.asarray(gyro_b) - np.asarray(gyro_a)) / dt, lever_arm)
+    # written out: np.cross is slow on 3-vectors, and this runs for every IMU sample
+    ax, ay, az = ((np.asarray(gyro_b) - np.asarray(gyro_a)) / dt).tolist()
+    rx, ry, rz = np.asarray(lever_arm, dtype=float).tolist()
+    return np.array([ay * rz - az * ry, az * rx - ax * rz, ax * ry - ay * rx])
+
+
+def integrate_piece(pim: gtsam.PreintegratedCombinedMeasurements, acc_a: np.ndarray,
+                    acc_b: np.ndarray, gyro_a: np.ndarray, gyro_b: np.ndarray, dt: float,
+                    lever_arm: np.ndarray | None = None) -> None:
+    """Integrate one piece of ``dt`` [s] between two IMU knots into ``pim``: the mean of its
+    end values (exact for piecewise-linear signals), minus :func:`euler_correction` when
+    ``lever_arm`` (IMU frame [m]) is given."""
+    acc = 0.5 * (acc_a + acc_b)
+    if lever_arm is not None:
+        acc = acc - euler_correction(gyro_a, gyro_b, dt, lever_arm)
+    pim.integrateMeasurement(acc, 0.5 * (gyro_a + gyro_b), dt)
 
 
 class ImuSample(NamedTuple):
@@ -377,9 +393,8 @@ def integrate(
 ) -> IntegrationReport:
     """Integrate the buffer's samples over [t0, t1] into ``pim``.
 
-    Each piece between consecutive knots is integrated with the mean of its end values
-    (exact for piecewise-linear signals), minus :func:`euler_correction` when ``lever_arm``
-    (IMU frame [m]) is given. The interval counts as covered when the ends can be
+    Each piece between consecutive knots is integrated by :func:`integrate_piece` (with
+    ``lever_arm``, IMU frame [m], its Euler term removed). The interval counts as covered when the ends can be
     interpolated (or held for at most ``max_extrapolation_s``) and no hole between samples
     exceeds ``max_gap_s``; otherwise nothing is integrated.
     """
@@ -401,10 +416,7 @@ def integrate(
         dt = tb - ta
         if dt <= 0.0:
             continue
-        acc = 0.5 * (aa + ab)
-        if lever_arm is not None:
-            acc = acc - euler_correction(ga, gb, dt, lever_arm)
-        pim.integrateMeasurement(acc, 0.5 * (ga + gb), dt)
+        integrate_piece(pim, aa, ab, ga, gb, dt, lever_arm)
         rep.n_segments += 1
         rep.integrated_s += dt
     rep.covered = rep.n_segments > 0
