@@ -102,7 +102,9 @@ def test_pipeline_counts_detections_and_reuses():
     room = np.vstack(faces)
     from lili_odom.pipeline.types import Scan
 
-    pipe = OdometryPipeline(PipelineConfig(method="hessian"))
+    cfg = PipelineConfig(method="hessian")
+    cfg.detection_schedule.background = False  # every detection serves its own scan
+    pipe = OdometryPipeline(cfg)
     n = pipe.config.detection_schedule.max_reuse
     assert n >= 1
     outs = [pipe.process_scan(Scan(100.0 + 0.1 * i, room, None)) for i in range(n + 3)]

@@ -255,3 +255,26 @@ def test_constrained_directions_are_refined_where_point_to_plane_holds_them():
     assert abs(refined[1, 3]) < 0.02 and abs(refined[2, 3] - 1.55) < 2e-3
     with pytest.raises(ValueError, match="refine_constrained"):
         PlaneRefinementConfig(refine_constrained="yes").validate()
+
+
+def test_closed_form_eigen_matches_numpy_on_planar_and_generic_neighbourhoods():
+    from lili_odom.pipeline.plane_refinement import symmetric_eigen3
+
+    rng = np.random.default_rng(5)
+    m = 2000
+    R = np.linalg.qr(rng.normal(size=(m, 3, 3)))[0]
+    spread = np.c_[rng.uniform(0.1, 2, m), rng.uniform(0.05, 1, m),
+                   np.where(np.arange(m) % 2, rng.uniform(1e-4, 1e-2, m), rng.uniform(0.05, 1, m))]
+    pts = rng.normal(size=(m, 10, 3)) * spread[:, None, :] @ R.transpose(0, 2, 1)
+    d = pts - pts.mean(axis=1, keepdims=True)
+    A = d.transpose(0, 2, 1) @ d / 10
+    w, v = symmetric_eigen3(A)
+    W, V = np.linalg.eigh(A)
+    assert np.allclose(w, W, rtol=0, atol=1e-12 * W[:, 2:].max())
+    planar = (W[:, 1] - W[:, 0]) / W[:, 2] > 0.3
+    assert planar.sum() > m // 4
+    assert np.allclose(np.abs(np.einsum("ij,ij->i", v, V[:, :, 0]))[planar], 1.0, atol=1e-9)
+    assert np.allclose(np.linalg.norm(v, axis=1), 1.0)
+    # isotropic and zero matrices: equal eigenvalues, some unit vector, no NaN
+    w0, v0 = symmetric_eigen3(np.stack([np.eye(3), np.zeros((3, 3))]))
+    assert np.allclose(w0, [[1, 1, 1], [0, 0, 0]]) and np.all(np.isfinite(v0))

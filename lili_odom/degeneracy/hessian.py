@@ -95,7 +95,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lili_odom.degeneracy.config import RegistrationConfig, finite_points, usable_length
-from lili_odom.degeneracy.reference import AlignmentResult, GuardedRegistration, ReferenceMap
+from lili_odom.degeneracy.reference import (AlignmentResult, GuardedRegistration, ReferenceMap,
+                                          kdtree_workers)
 from lili_odom.degeneracy.result import DegeneracyResult, failed_result
 from lili_odom.degeneracy.subspace import orthonormal_rows
 from lili_odom.geometry import adjoint, orthonormalize, scaling_matrix, transform_points
@@ -492,7 +493,7 @@ class ZhangDetector(_Base):
         if len(mp) < max(k, 3) or not len(scan):
             return np.zeros(0, dtype=int), np.zeros((0, 3)), np.zeros(0)
         x = transform_points(pose, scan)
-        dist, idx = reference.kdtree.query(x, k=k, workers=-1)
+        dist, idx = reference.kdtree.query(x, k=k, workers=kdtree_workers(len(x)))
         dist = dist.reshape(len(x), k)
         idx = idx.reshape(len(x), k)
         near = dist[:, -1] < cfg.max_neighbor_distance
@@ -601,7 +602,8 @@ class HessianDetector(_Base):
             return np.zeros(0, dtype=int), np.zeros((0, 3))
         normals, planarity = reference.normals(self.config.normal_k)
         d, j = reference.kdtree.query(
-            transform_points(pose, scan), distance_upper_bound=max_distance, workers=-1
+            transform_points(pose, scan), distance_upper_bound=max_distance,
+            workers=kdtree_workers(len(scan))
         )
         ok = np.isfinite(d)
         sel = np.flatnonzero(ok)

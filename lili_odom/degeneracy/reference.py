@@ -26,6 +26,16 @@ MIN_POINTS = 10
 SPACING_PROBES = 4000
 """Map points whose nearest-neighbour distances estimate ``ReferenceMap.spacing``."""
 
+THREADED_QUERY_POINTS = 20_000
+"""k-d tree queries of at least this many points use every core; smaller ones one thread
+(scipy's threads cost more than they save on a scan's few thousand points, and take a core
+from the background detector)."""
+
+
+def kdtree_workers(n: int) -> int:
+    """``workers`` argument of a ``cKDTree.query`` of ``n`` points."""
+    return -1 if n >= THREADED_QUERY_POINTS else 1
+
 
 class ReferenceMap:
     """A voxel-hash map of reference points (reference frame) plus derived geometry.
@@ -85,7 +95,7 @@ class ReferenceMap:
         if len(points) < 2:
             return float("nan")
         probes = points[:: max(1, -(-len(points) // SPACING_PROBES))]
-        d, _ = self.kdtree.query(probes, k=2, workers=-1)
+        d, _ = self.kdtree.query(probes, k=2, workers=kdtree_workers(len(probes)))
         return float(np.median(d[:, 1]))
 
     def normals(self, k: int = 10) -> tuple[np.ndarray, np.ndarray]:
@@ -97,7 +107,8 @@ class ReferenceMap:
         """
         cache = self.__dict__.setdefault("_normals_cache", {})
         if k not in cache:
-            _, idx = self.kdtree.query(self.points, k=min(k, len(self.points)), workers=-1)
+            _, idx = self.kdtree.query(self.points, k=min(k, len(self.points)),
+                                       workers=kdtree_workers(len(self.points)))
             nb = self.points[idx]  # (M, k, 3)
             centred = nb - nb.mean(axis=1, keepdims=True)
             cov = np.einsum("mki,mkj->mij", centred, centred) / max(idx.shape[1], 1)
@@ -163,7 +174,7 @@ class GuardedRegistration:
             d, _ = reference.kdtree.query(
                 transform_points(guess, points[:: max(1, len(points) // 500)]),
                 distance_upper_bound=max_correspondence_distance,
-                workers=-1,
+                workers=1,
             )
             if not np.any(np.isfinite(d)):
                 return AlignmentResult(guess, False, "no correspondences within reach")

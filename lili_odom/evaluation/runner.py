@@ -165,7 +165,10 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
                 yield item
 
         replay.on_output = record
-        replay.run(advancing(reader), max_scans=max_scans)
+        try:
+            replay.run(advancing(reader), max_scans=max_scans)
+        finally:
+            pipeline.close()  # the background detector process
         run.truth = replay.truth
         bar.close()
         if run.estimates:

@@ -11,6 +11,15 @@ one with the adjoint of the relative pose and re-orthonormalised in the scaled s
 
 ``max_reuse = 0`` runs the detector on every scan (the paper's setting).
 
+In the *background* (``background``, default), a detection that is due runs in a process of
+its own (:mod:`lili_odom.pipeline.detection_worker`) while the main loop goes on: the scan that
+asked for it, and the next ones until the result is applied, carry the last result over
+(``stale``, past the reuse bounds); the result is applied ``background_lag`` scans after the
+scan it was asked for, waiting for it then if it is not ready, so a run's results do not depend
+on the machine's speed. Only one background detection is in flight at a time. The first
+detection after a (re)start, and every detection while no earlier result is available (the
+last one failed), runs in the main loop.
+
 A degenerate subspace can also be *held* (``hold_distance_m`` > 0): after a detection found
 one, the next results, fresh or reused, are merged with it (carried over the same way) until
 the sensor has moved ``hold_distance_m`` from it. A place does not stop being a tunnel from
@@ -51,6 +60,13 @@ class DetectionScheduleConfig:
             Default: 1 m, during the first 10 m after a (re)start (``hold_warmup_m``).
         hold_warmup_m: the hold applies only until the sensor has travelled this far (path
             length) since the local map was (re)started [m]; 0 = for the whole run.
+        background: run due detections in a separate process (module docstring); default
+            True. False: every detection runs in the main loop and serves its own scan.
+        background_lag: scans after the requesting one at which a background result is
+            applied (>= 1); default 2.
+        background_timeout_s: longest wait for a background result [s]; beyond it the
+            detector process counts as hung and detection moves into the main loop.
+            Default 10.
     """
 
     max_reuse: int = 6
@@ -58,6 +74,9 @@ class DetectionScheduleConfig:
     reuse_angle_deg: float = 5.0
     hold_distance_m: float = 1.0
     hold_warmup_m: float = 10.0
+    background: bool = True
+    background_lag: int = 2
+    background_timeout_s: float = 10.0
 
     def validate(self, prefix: str = "detection_schedule.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -68,6 +87,9 @@ class DetectionScheduleConfig:
         check_range(prefix + "reuse_angle_deg", self.reuse_angle_deg, 0.0, 180.0, unit="deg")
         check_range(prefix + "hold_distance_m", self.hold_distance_m, 0.0, 1000.0, unit="m")
         check_range(prefix + "hold_warmup_m", self.hold_warmup_m, 0.0, 1e6, unit="m")
+        check_range(prefix + "background_lag", self.background_lag, 1, 100)
+        check_range(prefix + "background_timeout_s", self.background_timeout_s, 0.0, 3600.0,
+                    lo_open=True, unit="s")
 
 
 def carry_over(result: DegeneracyResult, pose: np.ndarray, age: int) -> DegeneracyResult:
@@ -131,10 +153,22 @@ class DetectionSchedule:
         self._age += 1
         return carry_over(last, pose, self._age)
 
-    def record(self, result: DegeneracyResult) -> None:
-        """A fresh detection: reusable from the next scan on when it succeeded."""
+    @property
+    def has_last(self) -> bool:
+        """A successful detection is available to carry over (``stale``)."""
+        return self._last is not None
+
+    def stale(self, pose: np.ndarray) -> DegeneracyResult:
+        """The last detection carried over to ``pose`` whatever its age and distance (while a
+        newer one is computed in the background); requires ``has_last``."""
+        self._age += 1
+        return carry_over(self._last, pose, self._age)
+
+    def record(self, result: DegeneracyResult, age: int = 0) -> None:
+        """A fresh detection, made ``age`` scans before the current one (0: on it): reusable
+        from the next scan on (``age`` 0) or from the current one, when it succeeded."""
         self._last = result if result.ok else None
-        self._age = 0
+        self._age = max(0, int(age) - 1) if age else 0
         if result.ok and result.degenerate:
             self._held, self._held_age = result, 0
 

@@ -10,7 +10,9 @@ measured offline is what runs on the robot. Per scan (``process_scan``):
    (KISS-ICP, ``ScanMatcher``);
 4. the selected detector (``lili`` | ``zhang`` | ``hessian`` | ``none``) finds the degenerate
    subspace of that registration, reusing the ICP optimum, unless a detection of the last
-   scans nearby can be carried over (:mod:`lili_odom.pipeline.detection_schedule`);
+   scans nearby can be carried over; by default a due detection runs in a background process
+   and is applied a couple of scans later (:mod:`lili_odom.pipeline.detection_schedule`,
+   :mod:`lili_odom.pipeline.detection_worker`; ``close()`` stops that process);
 5. on a degenerate scan the registration is held at the wheels' prediction along the subspace
    (solution remapping, :mod:`lili_odom.pipeline.remap`); directions outside the subspace
    that point-to-plane barely holds join it, and the registration is checked by
@@ -32,6 +34,7 @@ import logging
 import time
 from collections import Counter
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 
@@ -45,6 +48,7 @@ from lili_odom.degeneracy.subspace import orthonormal_rows
 from lili_odom.fusion.estimator import FusionEstimator, SubspaceMeasurement
 from lili_odom.fusion.subspace import scaled_lidar_to_base
 from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionScheduleConfig
+from lili_odom.pipeline.detection_worker import DetectionWorker
 from lili_odom.pipeline.plane_refinement import (PlaneFitCache, PlaneRefinementConfig,
                                                  refine_in_subspace)
 from lili_odom.pipeline.remap import constrained_registration
@@ -142,15 +146,21 @@ class _AlongTrack:
     degeneracy: DegeneracyResult | None
 
 
+def detector_factory(config: PipelineConfig):
+    """A picklable callable that builds the configured detector, or None for ``none``."""
+    if config.method == "lili":
+        return partial(LiliDetector, config.lili)
+    if config.method == "zhang":
+        return partial(ZhangDetector, config.zhang)
+    if config.method == "hessian":
+        return partial(HessianDetector, config.hessian)
+    return None
+
+
 def make_detector(config: PipelineConfig):
     """The configured detector object, or None for ``none``."""
-    if config.method == "lili":
-        return LiliDetector(config.lili)
-    if config.method == "zhang":
-        return ZhangDetector(config.zhang)
-    if config.method == "hessian":
-        return HessianDetector(config.hessian)
-    return None
+    factory = detector_factory(config)
+    return None if factory is None else factory()
 
 
 def basis_in_base(result: DegeneracyResult, T_base_lidar: np.ndarray) -> np.ndarray:
@@ -170,6 +180,10 @@ class OdometryPipeline:
         self.counters: Counter[str] = Counter()
         self._detector = make_detector(self.config)
         self._schedule = DetectionSchedule(self.config.detection_schedule)
+        self._background = self.config.detection_schedule.background
+        self._worker: DetectionWorker | None = None  # started at the first map update
+        self._pending: int | None = None  # detection request in flight (its sequence number)
+        self._detection_seq = 0
         self._matcher = ScanMatcher(self.config.scan_matcher)
         self._new_estimator()
         self._last_stamp: float | None = None
@@ -216,7 +230,7 @@ class OdometryPipeline:
         """
         old = self.estimator
         self._matcher.reset()
-        self._schedule.reset(new_map=True)
+        self._forget_detections(new_map=True)
         self._new_estimator()
         if keep_from is not None and self._last_stamp is not None:
             t1 = self._last_stamp - self.config.max_backward_jump_s
@@ -300,7 +314,7 @@ class OdometryPipeline:
                                    "re-initialised at the registered pose", gap, t_ref)
                 warnings.append(f"{gap:.2f} s gap: re-initialised at the registered pose")
                 old = self.estimator
-                self._schedule.reset()
+                self._forget_detections()
                 self._new_estimator()  # keeps the map; the state restarts at this scan
                 self.estimator.imu, self.estimator.wheels = old.imu, old.wheels
                 self.estimator.wheel_scale = old.wheel_scale  # same wheels, same calibration
@@ -343,20 +357,9 @@ class OdometryPipeline:
         degeneracy = None
         t0 = time.perf_counter()
         if self._detector is not None and not reg.ok:
-            self._schedule.reset()
+            self._forget_detections()
         if self._detector is not None and reg.ok and not first:
-            degeneracy = self._schedule.reusable(reg.pose)
-            if degeneracy is not None:
-                self.counters["detections_reused"] += 1
-            else:
-                det_points = source
-                n = self.config.detection_points
-                if n and len(det_points) > n:
-                    det_points = det_points[:: int(np.ceil(len(det_points) / n))]
-                degeneracy = self._detector.detect(self._matcher.reference, det_points, guess,
-                                                   optimized_pose=reg.pose)
-                self._schedule.record(degeneracy)
-                self.counters["detections"] += 1
+            degeneracy = self._detection(source, guess, reg.pose)
             degeneracy = self._schedule.hold(degeneracy, reg.pose)
             if degeneracy.details.get("held"):
                 self.counters["detections_held"] += 1
@@ -430,7 +433,13 @@ class OdometryPipeline:
 
         t0 = time.perf_counter()
         fused_lidar = fused.pose @ T_bl
-        self._matcher.update_map(map_points, fused_lidar, np.linalg.inv(guess) @ fused_lidar)
+        inserted = self._matcher.update_map(map_points, fused_lidar,
+                                            np.linalg.inv(guess) @ fused_lidar)
+        if self._background_enabled() and self._worker is None:
+            self._worker = DetectionWorker(detector_factory(self.config), *self._map_parameters(),
+                                           timeout_s=self.config.detection_schedule.background_timeout_s)
+        if self._worker is not None and self._worker.alive:
+            self._worker.update_map(map_points, inserted)
         timings["map"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_start
 
@@ -457,6 +466,82 @@ class OdometryPipeline:
         self._last_output = out
         self.counters["processed"] += 1
         return out
+
+    def close(self) -> None:
+        """Stop the background detector process, if any (idempotent; the pipeline keeps
+        working, detecting in its main loop)."""
+        if self._worker is not None:
+            self._worker.close()
+            self._worker = None
+        self._pending = None
+        self._background = False
+
+    def _background_enabled(self) -> bool:
+        return self._detector is not None and self._background
+
+    def _map_parameters(self) -> tuple[float, float, int]:
+        c = self.config.scan_matcher
+        return c.voxel, c.max_range, c.max_points_per_voxel
+
+    def _forget_detections(self, new_map: bool = False) -> None:
+        """Drop the last detection and the one in flight (re-initialisation, failed
+        registration); with ``new_map`` the local map was cleared too."""
+        self._schedule.reset(new_map=new_map)
+        self._pending = None
+        if new_map and self._worker is not None:
+            self._worker.reset()
+
+    def _detection_points(self, source: np.ndarray) -> np.ndarray:
+        n = self.config.detection_points
+        if n and len(source) > n:
+            return source[:: int(np.ceil(len(source) / n))]
+        return source
+
+    def _detection(self, source: np.ndarray, guess: np.ndarray,
+                   pose: np.ndarray) -> DegeneracyResult:
+        """This scan's detection (registered at ``pose`` from ``guess``): a recent one
+        carried over, a background result that is due, or a new detection
+        (:mod:`lili_odom.pipeline.detection_schedule`)."""
+        self._detection_seq += 1
+        seq = self._detection_seq
+        self._collect_background(seq)
+        degeneracy = self._schedule.reusable(pose)
+        if degeneracy is not None:
+            self.counters["detections_reused"] += 1
+            return degeneracy
+        points = self._detection_points(source)
+        worker = self._worker
+        if worker is not None and worker.alive and self._schedule.has_last:
+            if self._pending is None and worker.submit(seq, points, guess, pose):
+                self._pending = seq
+                self.counters["detections"] += 1
+                self.counters["detections_background"] += 1
+            if self._pending is not None:
+                self.counters["detections_reused"] += 1
+                return self._schedule.stale(pose)
+        degeneracy = self._detector.detect(self._matcher.reference, points, guess,
+                                           optimized_pose=pose)
+        self._schedule.record(degeneracy)
+        self.counters["detections"] += 1
+        return degeneracy
+
+    def _collect_background(self, seq: int) -> None:
+        """Apply the background detection in flight when it is due at scan ``seq``
+        (``background_lag`` scans after its own), waiting for it if needed."""
+        lag = self.config.detection_schedule.background_lag
+        if self._pending is None or self._worker is None or seq - self._pending < lag:
+            return
+        pending, self._pending = self._pending, None
+        result = self._worker.result(pending)
+        if result is None:
+            self.counters["background_detection_failures"] += 1
+            self._warn.warning("background", "background detection lost (%s)",
+                               self._worker.failure)
+            if not self._worker.alive:
+                self._worker = None
+                self._background = False
+            return
+        self._schedule.record(result, age=seq - pending)
 
     def _remaps(self, degeneracy: DegeneracyResult | None) -> bool:
         """Solution remapping applies: a degenerate detection and ``remap_iterations`` > 0."""

@@ -154,18 +154,28 @@ class ScanMatcher:
     def threshold(self) -> float:
         return float(self._threshold.get_threshold())
 
-    def update_map(self, map_points: np.ndarray, pose: np.ndarray, model_deviation: np.ndarray) -> None:
-        """Insert ``map_points`` (LiDAR frame) at ``pose`` and update the threshold model.
+    def update_map(self, map_points: np.ndarray, pose: np.ndarray,
+                   model_deviation: np.ndarray) -> np.ndarray:
+        """Insert ``map_points`` (LiDAR frame) at ``pose`` and update the threshold model;
+        returns the pose inserted at (re-orthonormalised), for a mirror of the map.
 
         ``model_deviation`` is ``guess^-1 @ pose`` (how far the prediction was off).
         """
         pose = orthonormalize(pose)
         if is_valid_pose(model_deviation, 1e-3):
             self._threshold.update_model_deviation(orthonormalize(model_deviation))
-        if len(map_points):
-            self.voxel_map.update(map_points, pose)
-        self.reference.invalidate()
+        insert_scan(self.reference, map_points, pose)
+        return pose
 
     def map_points(self) -> np.ndarray:
         """(M, 3) points of the local map in the odometry frame [m]."""
         return np.asarray(self.voxel_map.point_cloud()).reshape(-1, 3)
+
+
+def insert_scan(reference: ReferenceMap, points: np.ndarray, pose: np.ndarray) -> None:
+    """Insert ``points`` (LiDAR frame) into ``reference``'s voxel map at ``pose`` (a valid
+    ``T_odom_lidar``): KISS-ICP's update, which also drops the voxels beyond ``max_range`` of
+    the pose. The one way the local map changes, so that a mirror of it stays identical."""
+    if len(points):
+        reference.voxel_map.update(points, pose)
+    reference.invalidate()

@@ -516,6 +516,9 @@ class LiliOdomNode(Node):
         self._scans.close()
         if self._worker.is_alive():
             self._worker.join(timeout)
+        close = getattr(self.pipeline, "close", None)
+        if callable(close) and not self._worker.is_alive():
+            close()  # the background detector process
         if not self._summary_logged:
             self._summary_logged = True
             try:

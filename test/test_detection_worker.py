@@ -1,0 +1,167 @@
+"""Detection in a background process: the mirrored map, the schedule's lag and the fall-back
+to the main loop when the process is gone."""
+from __future__ import annotations
+
+from functools import partial
+
+import numpy as np
+import pytest
+
+from lili_odom import geometry
+from lili_odom.degeneracy.hessian import ZhangConfig, ZhangDetector
+from lili_odom.degeneracy.lili import LiliConfig, LiliDetector
+from lili_odom.degeneracy.reference import ReferenceMap
+from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionScheduleConfig
+from lili_odom.pipeline.detection_worker import DetectionWorker
+from lili_odom.pipeline.odometry import OdometryPipeline, PipelineConfig
+from lili_odom.pipeline.scan_matcher import insert_scan
+from lili_odom.pipeline.types import Scan
+
+VOXEL, MAX_RANGE, PER_VOXEL = 0.5, 50.0, 20
+
+
+def _corridor(rng, n=6000, length=40.0) -> np.ndarray:
+    """Points on the walls, floor and ceiling of a 4 m x 3 m corridor along x (no ends)."""
+    x = rng.uniform(-length / 2, length / 2, n)
+    side = rng.integers(0, 4, n)
+    u = rng.uniform(-1, 1, n)
+    y = np.where(side == 0, 2.0, np.where(side == 1, -2.0, 2.0 * u))
+    z = np.where(side == 2, 1.5, np.where(side == 3, -1.5, 1.5 * u))
+    return np.c_[x, y, z]
+
+
+def _map(scans, poses) -> ReferenceMap:
+    from kiss_icp.mapping import VoxelHashMap
+
+    ref = ReferenceMap(VoxelHashMap(VOXEL, MAX_RANGE, PER_VOXEL), VOXEL, PER_VOXEL)
+    for pts, pose in zip(scans, poses):
+        insert_scan(ref, pts, pose)
+    return ref
+
+
+@pytest.fixture()
+def corridor():
+    rng = np.random.default_rng(3)
+    poses = [geometry.exp(np.array([0.3 * i, 0, 0, 0, 0, 0])) for i in range(3)]
+    scans = [_corridor(rng) for _ in poses]
+    return scans, poses, _corridor(rng, 3000)
+
+
+def test_a_detection_in_the_worker_equals_one_against_the_same_map(corridor):
+    scans, poses, scan = corridor
+    make = partial(LiliDetector, LiliConfig(return_ratio=0.1))
+    worker = DetectionWorker(make, VOXEL, MAX_RANGE, PER_VOXEL, timeout_s=60)
+    try:
+        for pts, pose in zip(scans, poses):
+            worker.update_map(pts, pose)
+        guess = poses[-1] @ geometry.exp(np.array([0.05, 0.02, 0, 0, 0, 0.01]))
+        local = make().detect(_map(scans, poses), scan, guess, optimized_pose=poses[-1])
+        assert worker.submit(7, scan, guess, poses[-1])
+        remote = worker.result(7)
+    finally:
+        worker.close()
+    assert remote is not None and remote.ok and local.ok
+    assert remote.dimension == local.dimension == 1
+    assert abs(remote.basis_scaled[0, 0]) > 0.95  # along the corridor
+    assert np.allclose(np.abs(remote.basis_scaled), np.abs(local.basis_scaled), atol=1e-3)
+    assert remote.details["spacing"] == pytest.approx(local.details["spacing"])
+
+
+def test_reset_clears_the_mirrored_map_and_abandoned_results_are_skipped(corridor):
+    scans, poses, scan = corridor
+    worker = DetectionWorker(partial(ZhangDetector, ZhangConfig()), VOXEL, MAX_RANGE,
+                             PER_VOXEL, timeout_s=60)
+    try:
+        worker.update_map(scans[0], poses[0])
+        assert worker.submit(1, scan, poses[0], poses[0])
+        worker.reset()
+        assert worker.submit(2, scan, poses[0], poses[0])
+        first_kept = worker.result(2)  # result 1 was abandoned: skipped
+    finally:
+        worker.close()
+    assert first_kept is not None and not first_kept.ok  # against the emptied map
+    assert "too few" in first_kept.reason or "empty" in first_kept.reason
+
+
+def test_a_dead_worker_reports_and_does_not_block(corridor):
+    scans, poses, scan = corridor
+    worker = DetectionWorker(partial(ZhangDetector, ZhangConfig()), VOXEL, MAX_RANGE,
+                             PER_VOXEL, timeout_s=5)
+    worker._process.kill()
+    worker._process.join(5)
+    worker.submit(1, scan, poses[0], poses[0])
+    assert worker.result(1) is None
+    assert not worker.alive and "died" in worker.failure
+    assert worker.submit(2, scan, poses[0], poses[0]) is False
+    worker.close()
+
+
+def test_an_unpicklable_detector_factory_leaves_no_process():
+    worker = DetectionWorker(lambda: None, VOXEL, MAX_RANGE, PER_VOXEL)
+    assert not worker.alive and "could not start" in worker.failure
+    assert worker.submit(1, np.zeros((10, 3)), np.eye(4), np.eye(4)) is False
+    worker.close()
+
+
+def test_a_background_result_counts_its_age_from_its_own_scan():
+    cfg = DetectionScheduleConfig(max_reuse=3)
+    sched = DetectionSchedule(cfg)
+    from lili_odom.degeneracy.result import DegeneracyResult
+
+    res = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 8.0)
+    sched.record(res, age=2)  # asked for two scans ago, applied now
+    ages = []
+    for _ in range(3):
+        r = sched.reusable(np.eye(4))
+        ages.append(None if r is None else r.details["reused_age"])
+    assert ages == [2, 3, None]
+    assert sched.has_last and sched.stale(np.eye(4)).details["reused_age"] == 4
+
+
+def _room(rng) -> np.ndarray:
+    faces = []
+    for ax in range(3):
+        for s in (-1, 1):
+            p = rng.uniform(-1, 1, (1500, 3)) * [6, 5, 3]
+            p[:, ax] = s * [6, 5, 3][ax]
+            faces.append(p)
+    return np.vstack(faces)
+
+
+def test_the_pipeline_applies_background_results_lag_scans_later():
+    """Closed room at rest, ``max_reuse`` 2, lag 2: scan 1 detects in the main loop, scans 2-3
+    reuse it, scan 4 asks the background and carries the old result over, scan 6 applies
+    the background result of scan 4 (age 2), scans 7.. reuse it until it is too old."""
+    room = _room(np.random.default_rng(0))
+    cfg = PipelineConfig(method="hessian")
+    cfg.detection_schedule.max_reuse = 2
+    cfg.detection_schedule.background_lag = 2
+    pipe = OdometryPipeline(cfg)
+    try:
+        outs = [pipe.process_scan(Scan(100.0 + 0.1 * i, room, None)) for i in range(9)]
+    finally:
+        pipe.close()
+    ages = [o.degeneracy.details.get("reused_age", 0) for o in outs[1:]]
+    #        scan 1 2  3  4  5  6  7  8
+    assert ages == [0, 1, 2, 3, 4, 2, 3, 4], ages
+    assert pipe.counters["detections_background"] == 2  # scans 4 and 8
+    assert pipe.counters["detections"] == 3
+
+
+def test_the_pipeline_detects_in_its_main_loop_when_the_worker_is_gone():
+    room = _room(np.random.default_rng(1))
+    cfg = PipelineConfig(method="hessian")
+    cfg.detection_schedule.max_reuse = 1
+    cfg.detection_schedule.background_timeout_s = 5
+    pipe = OdometryPipeline(cfg)
+    outs = [pipe.process_scan(Scan(100.0 + 0.1 * i, room, None)) for i in range(4)]
+    assert pipe.counters["detections_background"] == 1
+    pipe._worker._process.kill()
+    outs += [pipe.process_scan(Scan(100.0 + 0.1 * i, room, None)) for i in range(4, 10)]
+    assert all(o is not None and o.degeneracy.ok for o in outs[1:])
+    assert pipe.counters["background_detection_failures"] == 1
+    # from then on every due detection runs in the main loop: fresh results, no stale ones
+    assert pipe._worker is None
+    fresh = [not o.degeneracy.details.get("reused") for o in outs[5:]]
+    assert fresh.count(True) >= 2
+    pipe.close()
