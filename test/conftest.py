@@ -27,3 +27,17 @@ def plane_pair(seed: int = 0, rotation: np.ndarray | None = None):
     T[:3, 3] = R @ np.array([0.0, 0.0, 1.0])
     scan = scan_plane - [0.0, 0.0, 1.0]
     return ref @ R.T, scan, T
+
+
+def closed_room(seed: int = 0, per_face: int = 1500) -> np.ndarray:
+    """Points on the six faces of a closed 12 m x 10 m x 6 m room centred on the sensor [m]
+    (every direction constrained)."""
+    rng = np.random.default_rng(seed)
+    half = np.array([6.0, 5.0, 3.0])
+    faces = []
+    for ax in range(3):
+        for s in (-1, 1):
+            p = rng.uniform(-1, 1, (per_face, 3)) * half
+            p[:, ax] = s * half[ax]
+            faces.append(p)
+    return np.vstack(faces)

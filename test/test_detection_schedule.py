@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import closed_room
 
 from lili_odom import geometry
 from lili_odom.degeneracy.result import DegeneracyResult, failed_result
@@ -92,14 +93,7 @@ def test_max_reuse_zero_detects_every_scan():
 def test_pipeline_counts_detections_and_reuses():
     """In a closed room at rest: one detection, then ``max_reuse`` reuses (the default
     schedule), then a detection again."""
-    rng = np.random.default_rng(0)
-    faces = []
-    for ax in range(3):
-        for s in (-1, 1):
-            p = rng.uniform(-1, 1, (1500, 3)) * [6, 5, 3]
-            p[:, ax] = s * [6, 5, 3][ax]
-            faces.append(p)
-    room = np.vstack(faces)
+    room = closed_room(seed=0)
     from lili_odom.pipeline.types import Scan
 
     cfg = PipelineConfig(method="hessian")

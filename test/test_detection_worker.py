@@ -6,6 +6,7 @@ from functools import partial
 
 import numpy as np
 import pytest
+from conftest import closed_room
 
 from lili_odom import geometry
 from lili_odom.degeneracy.hessian import ZhangConfig, ZhangDetector
@@ -118,21 +119,11 @@ def test_a_background_result_counts_its_age_from_its_own_scan():
     assert sched.has_last and sched.stale(np.eye(4)).details["reused_age"] == 4
 
 
-def _room(rng) -> np.ndarray:
-    faces = []
-    for ax in range(3):
-        for s in (-1, 1):
-            p = rng.uniform(-1, 1, (1500, 3)) * [6, 5, 3]
-            p[:, ax] = s * [6, 5, 3][ax]
-            faces.append(p)
-    return np.vstack(faces)
-
-
 def test_the_pipeline_applies_background_results_lag_scans_later():
     """Closed room at rest, ``max_reuse`` 2, lag 2: scan 1 detects in the main loop, scans 2-3
     reuse it, scan 4 asks the background and carries the old result over, scan 6 applies
     the background result of scan 4 (age 2), scans 7.. reuse it until it is too old."""
-    room = _room(np.random.default_rng(0))
+    room = closed_room(seed=0)
     cfg = PipelineConfig(method="hessian")
     cfg.detection_schedule.max_reuse = 2
     cfg.detection_schedule.background_lag = 2
@@ -149,7 +140,7 @@ def test_the_pipeline_applies_background_results_lag_scans_later():
 
 
 def test_the_pipeline_detects_in_its_main_loop_when_the_worker_is_gone():
-    room = _room(np.random.default_rng(1))
+    room = closed_room(seed=1)
     cfg = PipelineConfig(method="hessian")
     cfg.detection_schedule.max_reuse = 1
     cfg.detection_schedule.background_timeout_s = 5
