@@ -505,25 +505,36 @@ class OdometryPipeline:
         self._detection_seq += 1
         seq = self._detection_seq
         self._collect_background(seq)
+        worker = self._worker
+        background = worker is not None and worker.alive
+        lag = self.config.detection_schedule.background_lag
+        if (background and self._pending is None and self._schedule.has_last
+                and self._schedule.expires_within(pose, lag)):
+            self._submit(seq, source, guess, pose)  # to take over when the last runs out
         degeneracy = self._schedule.reusable(pose)
         if degeneracy is not None:
             self.counters["detections_reused"] += 1
             return degeneracy
-        points = self._detection_points(source)
-        worker = self._worker
-        if worker is not None and worker.alive and self._schedule.has_last:
-            if self._pending is None and worker.submit(seq, points, guess, pose):
-                self._pending = seq
-                self.counters["detections"] += 1
-                self.counters["detections_background"] += 1
+        if background and self._schedule.has_last:
+            if self._pending is None:
+                self._submit(seq, source, guess, pose)
             if self._pending is not None:
                 self.counters["detections_reused"] += 1
                 return self._schedule.stale(pose)
+        points = self._detection_points(source)
         degeneracy = self._detector.detect(self._matcher.reference, points, guess,
                                            optimized_pose=pose)
         self._schedule.record(degeneracy)
         self.counters["detections"] += 1
         return degeneracy
+
+    def _submit(self, seq: int, source: np.ndarray, guess: np.ndarray,
+                pose: np.ndarray) -> None:
+        """Ask the background detector for scan ``seq``'s detection."""
+        if self._worker.submit(seq, self._detection_points(source), guess, pose):
+            self._pending = seq
+            self.counters["detections"] += 1
+            self.counters["detections_background"] += 1
 
     def _collect_background(self, seq: int) -> None:
         """Apply the background detection in flight when it is due at scan ``seq``
