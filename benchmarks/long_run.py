@@ -1,7 +1,8 @@
 """Long run memory: the odometry over the whole of Trial 2 (430 m) with RSS sampled.
 
-RSS is read from ``/proc/self/statm`` every ``--every`` processed scans (and the local map
-size beside it); reported: the peak RSS (``getrusage``), and the linear trend of the second
+RSS of the process and its own child processes (the background detector) is read from
+``/proc`` every ``--every`` processed scans (and the local map size beside it); reported: the
+peak RSS (the larger of the process's ``getrusage`` peak and the largest sample), and the linear trend of the second
 half in MB per 100 scans (local map pruning and the bounded fusion window should make it
 flat). The run itself keeps only the estimated poses (about 0.03 MB per 100 scans); the
 ground truth is read after it. ``--set`` overrides pipeline parameters and ``--no-save``
@@ -17,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import resource
 import sys
 import time
@@ -25,15 +25,8 @@ import time
 import numpy as np
 
 from benchmarks._common import SET_HELP, apply_set, parse_set
+from benchmarks._memory import tree_rss_mb
 from benchmarks.faults import LONG_RUN_RSS_TARGET_MB, RESULTS, save_results
-
-PAGE_MB = os.sysconf("SC_PAGE_SIZE") / 2 ** 20
-
-
-def rss_mb() -> float:
-    with open("/proc/self/statm") as f:
-        return int(f.read().split()[1]) * PAGE_MB
-
 
 def second_half_trend(scans: np.ndarray, rss: np.ndarray) -> tuple[float, int]:
     """Slope [MB per 100 scans] of a least-squares line through the second half."""
@@ -92,7 +85,7 @@ def main(argv=None) -> int:
         count[0] += 1
         n = count[0]
         if n == 1 or n % args.every == 0:
-            samples.append((n, time.perf_counter() - t0, rss_mb(),
+            samples.append((n, time.perf_counter() - t0, tree_rss_mb(),
                             int(len(pipeline.local_map_points()))))
             if not args.no_progress and n % (args.every * 25) == 0:
                 print(f"{n} scans, RSS {samples[-1][2]:.0f} MB, map {samples[-1][3]} points",
@@ -106,7 +99,8 @@ def main(argv=None) -> int:
 
     with BagReader(bag, topics=topics) as reader:
         run = run_stream(limited(reader), cfg, on_output=on_output)
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    peak = max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+               max(s[2] for s in samples) if samples else 0.0)
     with BagReader(bag, topics=[cfg.ground_truth_topic]) as reader:
         run.truth.extend(filter(None, (truth_sample(item.msg) for item in reader)))
     arr = np.array(samples, dtype=float)

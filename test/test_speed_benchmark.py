@@ -81,3 +81,24 @@ def test_stage_stats_leave_unmeasured_stages_empty():
     assert stats["parse"]["mean_ms"] == pytest.approx(2.0)
     assert stats["parse"]["max_ms"] == pytest.approx(3.0)
     assert stats["icp"] is None and stats["map"] is None
+
+
+def test_process_tree_rss_counts_a_child_process():
+    import subprocess
+    import sys
+    import time
+
+    from benchmarks._memory import tree_rss_mb
+
+    alone = tree_rss_mb()
+    child = subprocess.Popen([sys.executable, "-c",
+                              "import time; b = b'x' * (200 * 2**20); time.sleep(30)"])
+    try:
+        deadline = time.monotonic() + 20
+        while tree_rss_mb() < alone + 150 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert tree_rss_mb() >= alone + 150  # the child's 200 MB
+        assert tree_rss_mb(child.pid) >= 150
+    finally:
+        child.kill()
+        child.wait()
