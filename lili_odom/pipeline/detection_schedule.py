@@ -11,14 +11,12 @@ one with the adjoint of the relative pose and re-orthonormalised in the scaled s
 
 ``max_reuse = 0`` runs the detector on every scan (the paper's setting).
 
-In the *background* (``background``, default), detections run in a process of their own
-(:mod:`lili_odom.pipeline.detection_worker`) while the main loop goes on. A result is applied
-``background_lag`` scans after the scan it was asked for (waiting for it then if it is not
-ready, so a run's results do not depend on the machine's speed), so it is asked for that many
-scans before the last one stops being reusable (``expires_within``, extrapolating the last
-scan's motion): it takes over when the last one would have run out. Where that was not
-foreseen (a sudden turn), the scans until the new result is applied carry the last one over
-past the reuse bounds (``stale``). Only one background detection is in flight at a time. The first
+In the *background* (``background``, default), a detection that is due runs in a process of
+its own (:mod:`lili_odom.pipeline.detection_worker`) while the main loop goes on: the scan that
+asked for it, and the next ones until the result is applied, carry the last result over
+(``stale``, past the reuse bounds); the result is applied ``background_lag`` scans after the
+scan it was asked for, waiting for it then if it is not ready, so a run's results do not depend
+on the machine's speed. Only one background detection is in flight at a time. The first
 detection after a (re)start, and every detection while no earlier result is available (the
 last one failed), runs in the main loop.
 
@@ -159,22 +157,6 @@ class DetectionSchedule:
             return None
         self._age += 1
         return carry_over(last, pose, self._age)
-
-    def expires_within(self, pose: np.ndarray, scans: int) -> bool:
-        """The last detection will not be reusable ``scans`` scans after ``pose`` (a scan
-        whose ``reusable`` carried it over), extrapolating the last scan's motion: time to
-        ask for the next one in the background."""
-        cfg, last = self.config, self._last
-        if last is None or self._age + scans >= cfg.max_reuse:
-            return True
-        if self._last_pose is None:
-            return False
-        step = np.linalg.inv(self._last_pose) @ pose
-        ahead = np.linalg.inv(last.pose) @ pose
-        if (np.linalg.norm(ahead[:3, 3]) + scans * np.linalg.norm(step[:3, 3])
-                > cfg.reuse_distance_m):
-            return True
-        return (_angle_deg(ahead) + scans * _angle_deg(step)) > cfg.reuse_angle_deg
 
     @property
     def has_last(self) -> bool:

@@ -507,10 +507,6 @@ class OdometryPipeline:
         self._collect_background(seq)
         worker = self._worker
         background = worker is not None and worker.alive
-        lag = self.config.detection_schedule.background_lag
-        if (background and self._pending is None and self._schedule.has_last
-                and self._schedule.expires_within(pose, lag)):
-            self._submit(seq, source, guess, pose)  # to take over when the last runs out
         degeneracy = self._schedule.reusable(pose)
         if degeneracy is not None:
             self.counters["detections_reused"] += 1
