@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from benchmarks._common import SET_HELP, apply_set, parse_set
-from benchmarks._memory import tree_rss_mb
+from benchmarks._process_tree import tree_rss_mb
 from benchmarks.faults import LONG_RUN_RSS_TARGET_MB, RESULTS, save_results
 
 def second_half_trend(scans: np.ndarray, rss: np.ndarray) -> tuple[float, int]:

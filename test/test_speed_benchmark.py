@@ -88,7 +88,7 @@ def test_process_tree_rss_counts_a_child_process():
     import sys
     import time
 
-    from benchmarks._memory import tree_rss_mb
+    from benchmarks._process_tree import tree_rss_mb
 
     alone = tree_rss_mb()
     child = subprocess.Popen([sys.executable, "-c",

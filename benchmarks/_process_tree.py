@@ -1,9 +1,10 @@
-"""Peak resident memory of this process together with its descendants (Linux ``/proc``).
+"""Memory and CPU of this process together with its descendants (Linux ``/proc``).
 
-``getrusage(RUSAGE_SELF)`` misses the odometry's background detector process, which is a
-child of a ``multiprocessing`` forkserver: ``ProcessTreeRss`` samples the resident set of this
-process and of every process descending from it in a background thread and keeps the peak of
-their sum [MB]. Elsewhere than Linux it reports NaN.
+``getrusage`` misses the odometry's background detector process, a child of a
+``multiprocessing`` forkserver that the run's process does not wait for: ``ProcessTreeRss``
+samples the resident set of this process and of every process descending from it in a
+background thread and keeps the peak of their sum [MB]; ``descendants_cpu_s`` is the CPU time
+of the descendants (with what they reaped). Elsewhere than Linux: NaN / 0.
 """
 from __future__ import annotations
 
@@ -27,9 +28,7 @@ def _parents() -> dict[int, int]:
     return out
 
 
-def tree_rss_mb(root: int | None = None) -> float:
-    """Resident memory [MB] of process ``root`` (default: this one) and its descendants now."""
-    root = os.getpid() if root is None else root
+def _tree(root: int) -> set[int]:
     parents = _parents()
     tree, frontier = {root}, [root]
     while frontier:
@@ -37,8 +36,31 @@ def tree_rss_mb(root: int | None = None) -> float:
         kids = [c for c, pp in parents.items() if pp == p and c not in tree]
         tree.update(kids)
         frontier.extend(kids)
+    return tree
+
+
+def descendants_cpu_s() -> float:
+    """CPU time [s] used so far by this process's living descendants and the processes they
+    reaped (user + system)."""
+    if not Path("/proc/self/stat").exists():
+        return 0.0
+    tick = os.sysconf("SC_CLK_TCK")
     total = 0
-    for pid in tree:
+    for pid in _tree(os.getpid()) - {os.getpid()}:
+        try:
+            stat = Path(f"/proc/{pid}/stat").read_text()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(")") + 2:].split()
+        total += sum(int(x) for x in fields[11:15])  # utime stime cutime cstime
+    return total / tick
+
+
+def tree_rss_mb(root: int | None = None) -> float:
+    """Resident memory [MB] of process ``root`` (default: this one) and its descendants now."""
+    root = os.getpid() if root is None else root
+    total = 0
+    for pid in _tree(root):
         try:
             total += int(Path(f"/proc/{pid}/statm").read_text().split()[1])
         except (OSError, IndexError, ValueError):
