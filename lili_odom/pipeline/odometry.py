@@ -436,8 +436,9 @@ class OdometryPipeline:
         inserted = self._matcher.update_map(map_points, fused_lidar,
                                             np.linalg.inv(guess) @ fused_lidar)
         if self._background_enabled() and self._worker is None:
-            self._worker = DetectionWorker(detector_factory(self.config), *self._map_parameters(),
-                                           timeout_s=self.config.detection_schedule.background_timeout_s)
+            timeout = self.config.detection_schedule.background_timeout_s
+            self._worker = DetectionWorker(detector_factory(self.config),
+                                           *self._map_parameters(), timeout_s=timeout)
         if self._worker is not None and self._worker.alive:
             self._worker.update_map(map_points, inserted)
         timings["map"] = time.perf_counter() - t0

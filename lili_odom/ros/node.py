@@ -40,7 +40,9 @@ thread owns the pipeline and feeds it through the same
 :class:`lili_odom.pipeline.feeder.MessageFeeder` as the offline runner, so a scan is
 processed with exactly the IMU/wheel data the runner would use: it waits until the samples
 covering its sweep end have arrived (at most ``pipeline.sensor_wait_s`` of stamp time, or the
-same in wall time when the other inputs fall silent).
+same in wall time when the other inputs fall silent). The pipeline runs its degeneracy
+detector in a child process (``pipeline.detection_schedule.background``), stopped at
+shutdown.
 
 Scan-drop policy: the cloud subscription keeps ``scan_subscription_depth`` samples, so clouds
 arriving while the executor is busy still reach the callback, which only queues them. At most
