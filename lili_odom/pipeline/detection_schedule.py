@@ -173,7 +173,7 @@ class DetectionSchedule:
         """A fresh detection, made ``age`` scans before the current one (0: on it): reusable
         from the next scan on (``age`` 0) or from the current one, when it succeeded."""
         self._last = result if result.ok else None
-        self._age = max(0, int(age) - 1) if age else 0
+        self._age = max(0, int(age) - 1)
         if result.ok and result.degenerate:
             self._held, self._held_age = result, 0
 
