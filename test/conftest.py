@@ -29,11 +29,12 @@ def plane_pair(seed: int = 0, rotation: np.ndarray | None = None):
     return ref @ R.T, scan, T
 
 
-def closed_room(seed: int = 0, per_face: int = 1500) -> np.ndarray:
-    """Points on the six faces of a closed 12 m x 10 m x 6 m room centred on the sensor [m]
-    (every direction constrained)."""
+def closed_room(seed: int = 0, per_face: int = 1500,
+                half: tuple[float, float, float] = (6.0, 5.0, 3.0)) -> np.ndarray:
+    """Points on the six faces of a closed room of half-extents ``half`` [m] centred on the
+    sensor (every direction constrained); default 12 m x 10 m x 6 m."""
     rng = np.random.default_rng(seed)
-    half = np.array([6.0, 5.0, 3.0])
+    half = np.asarray(half, dtype=float)
     faces = []
     for ax in range(3):
         for s in (-1, 1):

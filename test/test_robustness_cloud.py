@@ -18,6 +18,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import closed_room
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -40,15 +41,7 @@ STAMP0 = 1000.0
 
 def room(seed: int = 0, n_per_face: int = 600) -> np.ndarray:
     """Points on the six faces of a 24 x 12 x 6 m room around the sensor (LiDAR frame)."""
-    rng = np.random.default_rng(seed)
-    half = np.array([12.0, 6.0, 3.0])
-    faces = []
-    for ax in range(3):
-        for s in (-1, 1):
-            p = rng.uniform(-1, 1, (n_per_face, 3)) * half
-            p[:, ax] = s * half[ax]
-            faces.append(p)
-    return np.vstack(faces)
+    return closed_room(seed, n_per_face, half=(12.0, 6.0, 3.0))
 
 
 def ouster_cloud(xyz: np.ndarray, times: np.ndarray | None = None, height: int = 1,

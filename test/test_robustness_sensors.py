@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import closed_room
 from scipy.spatial.transform import Rotation
 
 from lili_odom.fusion.imu import ImuBuffer, StampJumpFilter
@@ -126,15 +127,8 @@ def test_sensor_cases_in_subprocess():
 
 
 def room(seed: int = 0, n_per_face: int = 600) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    half = np.array([12.0, 6.0, 3.0])
-    faces = []
-    for ax in range(3):
-        for s in (-1, 1):
-            p = rng.uniform(-1, 1, (n_per_face, 3)) * half
-            p[:, ax] = s * half[ax]
-            faces.append(p)
-    return np.vstack(faces)
+    """Points on the six faces of a 24 x 12 x 6 m room around the sensor (LiDAR frame)."""
+    return closed_room(seed, n_per_face, half=(12.0, 6.0, 3.0))
 
 
 def corridor(seed: int, n: int = 4000) -> np.ndarray:

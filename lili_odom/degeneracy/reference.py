@@ -171,11 +171,9 @@ class GuardedRegistration:
             return AlignmentResult(guess, False, "registration returned an invalid pose")
         if np.array_equal(pose, guess):
             # KISS-ICP returns the guess bit-for-bit when it found no correspondence at all.
-            d, _ = reference.kdtree.query(
-                transform_points(guess, points[:: max(1, len(points) // 500)]),
-                distance_upper_bound=max_correspondence_distance,
-                workers=1,
-            )
+            probe = transform_points(guess, points[:: max(1, len(points) // 500)])
+            d, _ = reference.kdtree.query(probe, distance_upper_bound=max_correspondence_distance,
+                                          workers=kdtree_workers(len(probe)))
             if not np.any(np.isfinite(d)):
                 return AlignmentResult(guess, False, "no correspondences within reach")
         return AlignmentResult(orthonormalize(pose), True)

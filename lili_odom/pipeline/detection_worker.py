@@ -50,12 +50,9 @@ def _context():
 
 
 def _serve(requests, replies, make_detector, voxel: float, max_range: float,
-           max_points_per_voxel: int, threads: int) -> None:
+           max_points_per_voxel: int) -> None:
     """The child's loop: apply map changes and answer detection requests in order."""
     from kiss_icp.mapping import VoxelHashMap
-    from kiss_icp.registration import Registration
-
-    Registration(1, 1e-3, threads)  # the first one sets the process's native thread limit
 
     from lili_odom.degeneracy.reference import ReferenceMap
     from lili_odom.pipeline.scan_matcher import insert_scan
@@ -108,15 +105,12 @@ class DetectionWorker:
         voxel, max_range, max_points_per_voxel: the local map's parameters (as the
             ``ScanMatcher``'s ``VoxelHashMap``) [m, m, points].
         timeout_s: longest wait for a result before the child counts as hung [s].
-        threads: native (TBB) threads of the child's registrations, 0 = all (default: on
-            two cores a one-thread child was slower, its detections came late).
     """
 
     def __init__(self, make_detector: Callable[[], Any], voxel: float, max_range: float,
-                 max_points_per_voxel: int, timeout_s: float = 10.0, threads: int = 0) -> None:
+                 max_points_per_voxel: int, timeout_s: float = 10.0) -> None:
         self.timeout_s = float(timeout_s)
-        self._args = (make_detector, float(voxel), float(max_range), int(max_points_per_voxel),
-                      int(threads))
+        self._args = (make_detector, float(voxel), float(max_range), int(max_points_per_voxel))
         self._process = None
         self.alive = True
         self.failure = ""
