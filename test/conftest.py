@@ -33,12 +33,6 @@ def closed_room(seed: int = 0, per_face: int = 1500,
                 half: tuple[float, float, float] = (6.0, 5.0, 3.0)) -> np.ndarray:
     """Points on the six faces of a closed room of half-extents ``half`` [m] centred on the
     sensor (every direction constrained); default 12 m x 10 m x 6 m."""
-    rng = np.random.default_rng(seed)
-    half = np.asarray(half, dtype=float)
-    faces = []
-    for ax in range(3):
-        for s in (-1, 1):
-            p = rng.uniform(-1, 1, (per_face, 3)) * half
-            p[:, ax] = s * half[ax]
-            faces.append(p)
-    return np.vstack(faces)
+    from lili_odom.fuzz.api import room
+
+    return room(np.random.default_rng(seed), per_face, half)

@@ -21,9 +21,11 @@ SPEED = 0.5  # forward speed of the room's observer [m/s]
 F64_MAX = float(np.finfo(np.float64).max)
 
 
-def room(rng: np.random.Generator, n_per_face: int = 150) -> np.ndarray:
-    """(6 n, 3) points on the faces of a 12 x 10 x 6 m box around the origin [m]."""
-    half = np.array([6.0, 5.0, 3.0])
+def room(rng: np.random.Generator, n_per_face: int = 150,
+         half: tuple[float, float, float] = (6.0, 5.0, 3.0)) -> np.ndarray:
+    """(6 n, 3) points on the faces of a box of half-extents ``half`` around the origin [m]
+    (default 12 x 10 x 6 m)."""
+    half = np.asarray(half, dtype=float)
     faces = []
     for axis in range(3):
         for sign in (-1.0, 1.0):
