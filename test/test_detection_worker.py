@@ -157,3 +157,35 @@ def test_the_pipeline_detects_in_its_main_loop_when_the_worker_is_gone():
     fresh = [not o.degeneracy.details.get("reused") for o in outs[5:]]
     assert fresh.count(True) >= 2
     pipe.close()
+
+
+def test_a_started_pipeline_has_its_worker_before_the_first_scan_and_the_same_results():
+    """``start()`` starts the detector process up front; the outputs are those of a pipeline
+    that starts it at its first map update. Once the map holds scans, ``start()`` does not
+    start a process whose mirror would miss them."""
+    room = closed_room(seed=2)
+    cfg = PipelineConfig(method="hessian")
+    cfg.detection_schedule.max_reuse = 2
+    poses = {}
+    for started in (False, True):
+        pipe = OdometryPipeline(cfg)
+        try:
+            if started:
+                pipe.start()
+                assert pipe._worker is not None and pipe._worker.alive
+            else:
+                assert pipe._worker is None
+            outs = [pipe.process_scan(Scan(100.0 + 0.1 * i, room, None)) for i in range(8)]
+            assert pipe.counters["detections_background"] >= 1
+            poses[started] = np.array([o.pose for o in outs])
+        finally:
+            pipe.close()
+    np.testing.assert_allclose(poses[True], poses[False], atol=1e-9)
+
+    late = OdometryPipeline(PipelineConfig(method="hessian"))
+    late._background = False  # the first scans fill the map without a process
+    late.process_scan(Scan(100.0, room, None))
+    late._background = True
+    late.start()
+    assert late._worker is None
+    late.close()

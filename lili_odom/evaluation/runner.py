@@ -166,6 +166,7 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
 
         replay.on_output = record
         try:
+            pipeline.start()  # the background detector process, before the first scan
             replay.run(advancing(reader), max_scans=max_scans)
         finally:
             pipeline.close()  # the background detector process

@@ -12,7 +12,8 @@ measured offline is what runs on the robot. Per scan (``process_scan``):
    subspace of that registration, reusing the ICP optimum, unless a detection of the last
    scans nearby can be carried over; by default a due detection runs in a background process
    and is applied a couple of scans later (:mod:`lili_odom.pipeline.detection_schedule`,
-   :mod:`lili_odom.pipeline.detection_worker`; ``close()`` stops that process);
+   :mod:`lili_odom.pipeline.detection_worker`; ``start()`` starts and ``close()`` stops
+   that process);
 5. on a degenerate scan the registration is held at the wheels' prediction along the subspace
    (solution remapping, :mod:`lili_odom.pipeline.remap`); directions outside the subspace
    that point-to-plane barely holds join it, and the registration is checked by
@@ -181,7 +182,7 @@ class OdometryPipeline:
         self._detector = make_detector(self.config)
         self._schedule = DetectionSchedule(self.config.detection_schedule)
         self._background = self.config.detection_schedule.background
-        self._worker: DetectionWorker | None = None  # started at the first map update
+        self._worker: DetectionWorker | None = None  # start() or the first map update
         self._pending: int | None = None  # detection request in flight (its sequence number)
         self._detection_seq = 0
         self._matcher = ScanMatcher(self.config.scan_matcher)
@@ -435,10 +436,7 @@ class OdometryPipeline:
         fused_lidar = fused.pose @ T_bl
         inserted = self._matcher.update_map(map_points, fused_lidar,
                                             np.linalg.inv(guess) @ fused_lidar)
-        if self._background_enabled() and self._worker is None:
-            timeout = self.config.detection_schedule.background_timeout_s
-            self._worker = DetectionWorker(detector_factory(self.config),
-                                           *self._map_parameters(), timeout_s=timeout)
+        self._start_worker()
         if self._worker is not None and self._worker.alive:
             self._worker.update_map(map_points, inserted)
         timings["map"] = time.perf_counter() - t0
@@ -467,6 +465,20 @@ class OdometryPipeline:
         self._last_output = out
         self.counters["processed"] += 1
         return out
+
+    def start(self) -> None:
+        """Start the background detector process now rather than at the first scan (its
+        start-up, most of a second, would otherwise delay that scan); nothing when detection
+        is not in the background or the local map already holds scans (the process then
+        starts at the next map update, as without this call)."""
+        if self._matcher.map_empty:
+            self._start_worker()
+
+    def _start_worker(self) -> None:
+        if self._background_enabled() and self._worker is None:
+            timeout = self.config.detection_schedule.background_timeout_s
+            self._worker = DetectionWorker(detector_factory(self.config),
+                                           *self._map_parameters(), timeout_s=timeout)
 
     def close(self) -> None:
         """Stop the background detector process, if any (idempotent; the pipeline keeps

@@ -214,6 +214,18 @@ def symmetric_eigen3(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return w, v
 
 
+def _covariances(d: np.ndarray) -> np.ndarray:
+    """(m, 3, 3) covariances of ``m`` neighbourhoods of centred points ``d`` (m, k, 3): the six
+    distinct entries as sums over the neighbours (faster than batched 3 x k products)."""
+    m, k = d.shape[:2]
+    x, y, z = d[..., 0], d[..., 1], d[..., 2]
+    cov = np.empty((m, 3, 3))
+    for i, j, a, b in ((0, 0, x, x), (1, 1, y, y), (2, 2, z, z), (0, 1, x, y), (0, 2, x, z),
+                       (1, 2, y, z)):
+        cov[:, i, j] = cov[:, j, i] = np.einsum("mk,mk->m", a, b) / k
+    return cov
+
+
 def _planes(reference: ReferenceMap, q: np.ndarray, k: int, max_dist: float,
             min_planarity: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Plane fits around ``q`` (odometry frame): (valid mask, normals, centroids, normal
@@ -224,7 +236,9 @@ def _planes(reference: ReferenceMap, q: np.ndarray, k: int, max_dist: float,
     neighbourhood covariance)."""
     pts = reference.points
     k = min(k, len(pts))
-    dist, idx = reference.kdtree.query(q, k=k, workers=kdtree_workers(len(q)))
+    # neighbours beyond max_dist come back as inf (index len(pts)) and fail the check below
+    dist, idx = reference.kdtree.query(q, k=k, distance_upper_bound=max_dist,
+                                       workers=kdtree_workers(len(q)))
     if k == 1:
         dist, idx = dist[:, None], idx[:, None]
     valid = np.isfinite(dist[:, -1]) & (dist[:, -1] <= max_dist)
@@ -235,9 +249,7 @@ def _planes(reference: ReferenceMap, q: np.ndarray, k: int, max_dist: float,
         return valid, normals, centroids, tilt_var
     nb = pts[idx[valid]]  # (m, k, 3)
     c = nb.mean(axis=1)
-    d = nb - c[:, None, :]
-    cov = (d.transpose(0, 2, 1) @ d) / k  # (m, 3, 3) neighbourhood covariances
-    w, normal = symmetric_eigen3(cov)
+    w, normal = symmetric_eigen3(_covariances(nb - c[:, None, :]))
     planarity = (w[:, 1] - w[:, 0]) / np.maximum(w[:, 2], 1e-12)
     good = planarity >= min_planarity
     sel = np.flatnonzero(valid)
@@ -325,10 +337,15 @@ def _debiased(H: np.ndarray, points: np.ndarray, to_twist: np.ndarray,
     tube the noise of the plane fits alone would otherwise claim centimetres along the axis.
     """
     Tv, Tw = to_twist[:3], to_twist[3:]
-    # A_i = Tv - [p_i]x Tw  (3, k) for every point: [p]x Tw columns are p x (Tw column)
-    A = Tv[None, :, :] - np.cross(points[:, :, None], Tw[None, :, :], axis=1)
-    Aw = (A * np.sqrt(weights)[:, None, None]).reshape(-1, A.shape[2])
-    noise = Aw.T @ Aw  # sum_m w_m A_m^T A_m
+    # sum_m w_m A_m^T A_m with A_m = Tv - [p_m]x Tw, from the weighted moments of the points:
+    # [p]x^T [p]x = |p|^2 I - p p^T, so only sum w, sum w p and sum w p p^T are needed
+    sw = float(weights.sum())
+    sp = weights @ points
+    spp = (points * weights[:, None]).T @ points
+    Px = np.array([[0.0, -sp[2], sp[1]], [sp[2], 0.0, -sp[0]], [-sp[1], sp[0], 0.0]])
+    cross = Tv.T @ Px @ Tw
+    noise = (sw * Tv.T @ Tv - cross - cross.T
+             + Tw.T @ (np.trace(spp) * np.eye(3) - spp) @ Tw)
     out = 0.5 * ((H - noise) + (H - noise).T)
     w, v = np.linalg.eigh(out)
     return (v * np.clip(w, 0.0, None)) @ v.T

@@ -176,6 +176,9 @@ class LiliOdomNode(Node):
         self.pipeline: PipelineLike = self._provider.create(dict(self.p))
         self.config = OdometryPipelineProvider().node_config(self.p)
         self._feeder = MessageFeeder(self.pipeline, self.config)
+        start = getattr(self.pipeline, "start", None)
+        if callable(start):
+            start()  # the background detector process starts before the first scan arrives
 
         self.counters: dict[str, int] = {
             "scans_received": 0, "scans_processed": 0, "scans_dropped": 0,
