@@ -467,10 +467,10 @@ class OdometryPipeline:
         return out
 
     def start(self) -> None:
-        """Start the background detector process now rather than at the first scan (its
-        start-up, most of a second, would otherwise delay that scan); nothing when detection
-        is not in the background or the local map already holds scans (the process then
-        starts at the next map update, as without this call)."""
+        """Start the background detector process now rather than at the first map update
+        (its start-up, most of a second, would otherwise delay the first scan). Nothing when
+        detection is not in the background, the process runs already, or the local map
+        already holds scans (a process started now would mirror a map without them)."""
         if self._matcher.map_empty:
             self._start_worker()
 
