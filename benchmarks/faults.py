@@ -289,6 +289,10 @@ def worker_play(job: dict) -> dict:
             # message as the recorder saw it
             **({**{k: v for k, v in diag.items() if k.startswith("latency_")},
                 "processing_status": processing.message if processing is not None else "",
+                "stage_ms": ({k[len("stage_"):-len("_ms")]: float(v)
+                              for k, v in processing.values.items()
+                              if k.startswith("stage_") and k.endswith("_ms")}
+                             if processing is not None else {}),
                 "received_latency_s": [round(t - stamp, 5) for stamp, t in got]}
                if "--restamp" in job.get("play_args", []) else {})}
 

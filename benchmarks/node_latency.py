@@ -47,7 +47,8 @@ KEPT = ("status", "rate", "method", "play_ok", "play_s", "published", "received"
         "dropped", "missing", "no_output", "errors", "odometry", "nothing_lost", "accounted",
         "mean_processing_s", "imu_received", "wheel_received", "latency_p50_s",
         "latency_p99_s", "latency_max_s", "latency_window_scans", "latency_scans",
-        "latency_run_max_s", "latency_invalid", "processing_status", "spin_thread_left",
+        "latency_run_max_s", "latency_invalid", "processing_status", "stage_ms",
+        "spin_thread_left",
         "stderr_tail", "received_latency_s")
 #: Scans at the start of a run reported apart in the subscriber's view (start-up costs).
 FIRST_SCANS = 10
@@ -192,6 +193,16 @@ def markdown(report: dict[str, Any], command: str) -> str:
     else:
         lines.append(f"- latency p99 <= {target_ms:g} ms at {report['target_resolution']}: "
                      "not measured in this run")
+    stage_rows = {res: r["stage_ms"] for res, r in rows.items() if r.get("stage_ms")}
+    if stage_rows:
+        names = list(dict.fromkeys(k for v in stage_rows.values() for k in v))  # stage order
+        lines += ["", "Node: mean time per scan and pipeline stage over its last 50 scans [ms] "
+                  "(`processing time` status of `/diagnostics`; `total` is the pipeline's own "
+                  "time, without parsing the cloud and publishing).", "",
+                  "| resolution | " + " | ".join(names) + " |",
+                  "|---|" + "---:|" * len(names)]
+        for res, st in stage_rows.items():
+            lines.append(f"| {res} | " + " | ".join(_fmt(st.get(k), 1) for k in names) + " |")
     failed = {res: r.get("stderr_tail", "") for res, r in rows.items() if r.get("status") != "ok"}
     if failed:
         lines += ["", "Runs that did not finish cleanly (the stderr tail is in the JSON): "

@@ -134,6 +134,14 @@ def test_node_latency_targets_and_report():
     assert "latency p99 <= 100 ms at 128x1024: 310 ms, **missed**" in md
     md32 = nl.markdown({**report, "resolutions": {"32x512": rows["32x512"]}}, "cmd")
     assert "**met** at every resolution measured" in md32 and "not measured in this run" in md32
+    assert "mean time per scan and pipeline stage" not in md32  # no stage figures, no table
+    rows["32x512"]["stage_ms"] = {"deskew": 2.5, "icp": 6.0, "total": 40.0}
+    rows["128x1024"]["stage_ms"] = {"deskew": 19.0, "icp": 9.5, "along_track": 15.0,
+                                    "total": 64.0}
+    md = nl.markdown(report, "cmd")
+    assert "| resolution | deskew | icp | total | along_track |" in md
+    assert "| 32x512 | 2.5 | 6.0 | 40.0 | – |" in md
+    assert "| 128x1024 | 19.0 | 9.5 | 64.0 | 15.0 |" in md
 
 
 def test_long_runs_at_several_resolutions_are_reported_with_the_rss_target():

@@ -164,3 +164,21 @@ def test_saved_map_reads_back(tmp_path, suffix):
     np.testing.assert_allclose(load_points(written), pts.astype(np.float32), atol=1e-5)
     with pytest.raises(ValueError, match="pcd or .ply"):
         save_points(tmp_path / "map.txt", pts)
+
+
+def test_processing_status_reports_the_mean_time_of_each_pipeline_stage():
+    clock = FakeClock()
+    m = HealthMonitor(HealthConfig(), clock)
+    assert m.stage_means() == {}
+    slow = _output()
+    slow.timings = {"deskew": 0.010, "icp": 0.004, "detector": 0.030, "total": 0.050}
+    fast = _output()
+    fast.timings = {"deskew": 0.010, "icp": 0.002, "detector": 0.010, "total": 0.030}
+    for i in range(60):  # only the last 50 count: 10 slow ones fall out
+        m.on_processed(0.05, slow if i < 35 else fast)
+    means = m.stage_means()
+    assert means["detector"] == pytest.approx((25 * 0.030 + 25 * 0.010) / 50)
+    assert means["icp"] == pytest.approx(0.003)
+    st = by_name(m.statuses())["processing time"]
+    assert st.values["stage_detector_ms"] == "20.0" and st.values["stage_total_ms"] == "40.0"
+    assert "(most in detector 20 ms, deskew 10 ms)" in st.message

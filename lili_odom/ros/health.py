@@ -9,8 +9,9 @@ and publishes what :meth:`HealthMonitor.statuses` returns as a
 Concerns: ``lidar input``, ``imu input``, ``wheel input`` (rates over the last ``window_s`` of
 wall time against the expected rates), ``scans dropped and missing`` (the node's queue drops;
 scans missing from gaps in the header stamps, i.e. lost before they reached the node),
-``processing time`` (per scan, against the LiDAR period; with the latency from a scan's sweep
-end to its published odometry, :mod:`lili_odom.ros.latency`), ``degeneracy`` (dimension and
+``processing time`` (per scan, against the LiDAR period; the mean per pipeline stage over the
+last 50 scans, ``stage_<name>_ms``; the latency from a scan's sweep end to its published
+odometry, :mod:`lili_odom.ros.latency`), ``degeneracy`` (dimension and
 directions of the last scan), ``wheel scale`` (the online estimate) and ``fusion`` (failures
 counted by the pipeline, scans without output).
 """
@@ -176,6 +177,7 @@ class HealthMonitor:
         self.dropped_meter = RateMeter(c.window_s, clock)
         self.gaps = StampGapCounter(1.0 / c.lidar_hz if c.lidar_hz > 0 else 0.0)
         self._proc: deque[float] = deque(maxlen=50)
+        self._stages: deque[Mapping[str, float]] = deque(maxlen=50)
         self.latency = LatencyStats(c.latency_window)
         self.last_output: Any = None
         self._failures_seen: dict[str, int] = {}
@@ -208,6 +210,9 @@ class HealthMonitor:
             self.scans_without_output += 1
         else:
             self.last_output = output
+            timings = getattr(output, "timings", None)
+            if isinstance(timings, Mapping) and timings:
+                self._stages.append(dict(timings))
 
     def on_published(self, latency_s: float) -> None:
         """A scan's odometry was published ``latency_s`` [s] after its sweep ended."""
@@ -223,6 +228,16 @@ class HealthMonitor:
             self._failures_seen[name] = value
         if new:
             self._failure_meter.tick(new)
+
+    def stage_means(self) -> dict[str, float]:
+        """Mean time [s] per pipeline stage (``OdometryOutput.timings``: predict, deskew, icp,
+        detector, ..., total) over the last 50 scans with an output; empty before the first."""
+        names: dict[str, list[float]] = {}
+        for timings in self._stages:
+            for k, v in timings.items():
+                if isinstance(v, (int, float)) and math.isfinite(v):
+                    names.setdefault(k, []).append(float(v))
+        return {k: float(np.mean(v)) for k, v in names.items()}
 
     # -- statuses ------------------------------------------------------------------------
 
@@ -307,6 +322,12 @@ class HealthMonitor:
         values = {"mean_s": _fmt(mean, 4), "max_s": _fmt(worst, 4),
                   "period_s": _fmt(period, 3), "scans": str(len(times))}
         text = f"mean {1000 * mean:.0f} ms, max {1000 * worst:.0f} ms per scan"
+        stages = self.stage_means()
+        values.update({f"stage_{k}_ms": _fmt(1000 * v, 1) for k, v in stages.items()})
+        slowest = sorted((k for k in stages if k != "total"), key=stages.get, reverse=True)[:2]
+        if slowest:
+            text += " (most in " + ", ".join(f"{k} {1000 * stages[k]:.0f} ms"
+                                             for k in slowest) + ")"
         lat = self.latency.percentiles()
         if lat is not None:
             values.update({"latency_p50_s": _fmt(lat["p50"], 4),
