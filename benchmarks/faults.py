@@ -387,8 +387,10 @@ def long_run_lines(lr: dict, section: str = "long_run") -> list[str]:
             f"{lr['bag']}, method `{lr['method']}`: {lr['scans']} scans, path "
             f"{_f(lr.get('path_length_m'), '.0f')} m, ATE {_f(lr.get('ate_rmse_m'))} m, "
             f"wall {_f(lr.get('wall_time_s'), '.0f')} s. RSS sampled every "
-            f"{lr['every']} scans (`/proc/self/statm`).", "",
-            f"- peak RSS: {_f(peak, '.0f')} MB (getrusage), sampled max "
+            f"{lr['every']} scans, of the process and its child processes (the background "
+            "detector; `/proc`).", "",
+            f"- peak RSS: {_f(peak, '.0f')} MB (the larger of the process's getrusage peak and "
+            "the largest sample), sampled max "
             f"{_f(lr['max_sampled_rss_mb'], '.0f')} MB; RSS after the first scan "
             f"{_f(lr['first_rss_mb'], '.0f')} MB",
             f"- peak RSS under 1.5 GB ({target:.0f} MB of 2^20 bytes): "

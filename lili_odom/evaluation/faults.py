@@ -287,7 +287,11 @@ def run_stream(items: Iterable[Any], config: Any, *,
 
     replay = Replay(config, on_output=record)
     t0 = time.perf_counter()
-    replay.run((_stamp_of(item)[:2] for item in items))
+    try:
+        replay.pipeline.start()  # the background detector process, before the first scan
+        replay.run((_stamp_of(item)[:2] for item in items))
+    finally:
+        replay.pipeline.close()
     run.wall_time_s = time.perf_counter() - t0
     run.truth = replay.truth
     run.clouds_in = replay.clouds_in
