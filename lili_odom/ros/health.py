@@ -233,7 +233,7 @@ class HealthMonitor:
         """Mean time [s] per pipeline stage (``OdometryOutput.timings``: predict, deskew, icp,
         detector, ..., total) over the last 50 scans with an output; empty before the first."""
         names: dict[str, list[float]] = {}
-        for timings in self._stages:
+        for timings in list(self._stages):  # a copy: the worker thread appends meanwhile
             for k, v in timings.items():
                 if isinstance(v, (int, float)) and math.isfinite(v):
                     names.setdefault(k, []).append(float(v))
