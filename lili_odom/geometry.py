@@ -24,6 +24,7 @@ __all__ = [
     "exp",
     "log",
     "adjoint",
+    "hat",
     "scale_twist",
     "unscale_twist",
     "scaling_matrix",
@@ -122,6 +123,11 @@ def exp(xi: np.ndarray) -> np.ndarray:
 def log(T: np.ndarray) -> np.ndarray:
     """SE(3) logarithm of a 4x4 matrix -> twist ``(v, w)``."""
     return from_gtsam_order(gtsam.Pose3.Logmap(pose3(T)))
+
+
+def hat(v: np.ndarray) -> np.ndarray:
+    """3x3 skew-symmetric matrix of a 3-vector: ``hat(v) @ u == np.cross(v, u)``."""
+    return np.asarray(gtsam.Rot3.Hat(np.asarray(v, dtype=float).reshape(3)))
 
 
 def adjoint(T: np.ndarray) -> np.ndarray:

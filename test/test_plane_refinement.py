@@ -278,3 +278,22 @@ def test_closed_form_eigen_matches_numpy_on_planar_and_generic_neighbourhoods():
     # isotropic and zero matrices: equal eigenvalues, some unit vector, no NaN
     w0, v0 = symmetric_eigen3(np.stack([np.eye(3), np.zeros((3, 3))]))
     assert np.allclose(w0, [[1, 1, 1], [0, 0, 0]]) and np.all(np.isfinite(v0))
+
+
+def test_the_fit_noise_term_equals_its_per_point_sum():
+    """``_debiased`` subtracts ``sum_m w_m A_m^T A_m`` (``A_m = Tv - [p_m]x Tw``) from the
+    information; its closed form from the points' moments equals the sum written out."""
+    from lili_odom.pipeline.plane_refinement import _debiased
+
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(200, 3)) * 4.0
+    weights = rng.uniform(0.0, 1.0, 200)
+    to_twist = rng.normal(size=(6, 2))
+    Tv, Tw = to_twist[:3], to_twist[3:]
+    noise = sum(w * (Tv - geometry.hat(p) @ Tw).T @ (Tv - geometry.hat(p) @ Tw)
+                for p, w in zip(points, weights))
+    H = noise + np.diag([50.0, 3.0])  # PSD after the subtraction: nothing clipped
+    np.testing.assert_allclose(_debiased(H, points, to_twist, weights), np.diag([50.0, 3.0]),
+                               atol=1e-8)
+    np.testing.assert_allclose(geometry.hat([1.0, 2.0, 3.0]) @ [-2.0, 0.5, 4.0],
+                               np.cross([1.0, 2.0, 3.0], [-2.0, 0.5, 4.0]))

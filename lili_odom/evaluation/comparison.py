@@ -1,9 +1,9 @@
-"""Tables that compare parameter files over a set of runs: run names, per-run error tables,
-paired differences and the reuse of stored runs.
+"""Markdown tables that compare odometry configurations run on the same bags.
 
-A *run row* is a dict with ``config`` (the run's name, :func:`run_label`), its errors in
-metres (``ate_m``, ``rpe_m``, ``final_m``) and the keys that identify it (``trial``, ``seed``,
-``start`` [s], ``repeat``).
+Input everywhere is a list of *run rows*: dicts with ``config`` (the configuration's name,
+:func:`run_label`), errors in metres (``ate_m``, ``rpe_m``, ``final_m``) and the fields that
+identify the bag window (``trial``, ``seed``, ``start`` [s], ``repeat``). The functions only
+format and compare rows; running the odometry is the caller's job.
 """
 from __future__ import annotations
 
@@ -15,17 +15,18 @@ __all__ = ["run_label", "seeds_table", "paired_table", "matching_runs"]
 
 
 def run_label(config: str, method: str = "lili") -> str:
-    """A run's name: ``default`` or the parameter file's stem, with ``_<method>`` appended
-    unless the method is ``lili``."""
+    """Name of a configuration: ``"default"`` for ``config == "default"``, else the stem of
+    the parameter file path; ``_<method>`` is appended for every method but ``lili``."""
     name = "default" if config == "default" else Path(config).stem
     return name if method == "lili" else f"{name}_{method}"
 
 
 def seeds_table(rows: list[dict], trials: list[int], seeds: list[int], labels: list[str],
                 targets: dict[int, dict[str, float]]) -> list[str]:
-    """Markdown lines: per trial and run name, ATE / RPE [m] of each run in ``seeds``, their
-    mean and worst, and how many are within ``targets[trial]`` (``{"ate_m": .., "rpe_m": ..}``,
-    upper bounds)."""
+    """Markdown table lines, one row per (trial, configuration name in ``labels``): ATE / RPE
+    [m] for each value of ``seeds``, their mean and maximum, and the count of rows within
+    ``targets[trial]`` (upper bounds ``{"ate_m": .., "rpe_m": ..}``; missing keys: no
+    bound)."""
     lines = ["| trial | configuration | " + " | ".join(f"seed {s}" for s in seeds)
              + " | mean | worst | target |", "|---|---|" + "---|" * (len(seeds) + 3)]
     for trial in trials:
@@ -46,9 +47,11 @@ def seeds_table(rows: list[dict], trials: list[int], seeds: list[int], labels: l
 
 
 def paired_table(rows: list[dict], labels: list[str]) -> list[str]:
-    """Markdown lines: each run name after the first against the first, window by window
-    (``(seed, start)``; final error averaged over repeats): mean difference, windows where
-    the first ends further off, and the Wilcoxon signed-rank p-value (scipy)."""
+    """Markdown table lines comparing each configuration in ``labels[1:]`` with
+    ``labels[0]`` on the windows both have (a window is ``(seed, start)``; its final error
+    [m] is the mean over repeats): mean difference, the number of windows where ``labels[0]``
+    ends further off, and the Wilcoxon signed-rank p-value (scipy; NaN for fewer than two or
+    all-zero differences). Configurations with no common window get no row."""
     from scipy.stats import wilcoxon
 
     def finals(config: str) -> dict[tuple, float]:
@@ -75,9 +78,9 @@ def paired_table(rows: list[dict], labels: list[str]) -> list[str]:
 
 def matching_runs(stored: dict, settings: dict, wanted: Iterable[tuple],
                   key: tuple[str, ...]) -> list[dict] | None:
-    """The stored run rows (``stored["runs"]``) whose ``key`` fields are among ``wanted``,
-    when ``stored`` was made with ``settings`` (equal values) and holds every wanted run;
-    else None."""
+    """Rows of ``stored["runs"]`` whose ``key`` fields form a tuple in ``wanted``, when every
+    ``settings`` item equals ``stored``'s value for it and every wanted tuple is present;
+    None otherwise (the caller runs them afresh)."""
     wanted = set(wanted)
 
     def ident(r: dict) -> tuple:

@@ -342,8 +342,7 @@ def _debiased(H: np.ndarray, points: np.ndarray, to_twist: np.ndarray,
     sw = float(weights.sum())
     sp = weights @ points
     spp = (points * weights[:, None]).T @ points
-    Px = np.array([[0.0, -sp[2], sp[1]], [sp[2], 0.0, -sp[0]], [-sp[1], sp[0], 0.0]])
-    cross = Tv.T @ Px @ Tw
+    cross = Tv.T @ geometry.hat(sp) @ Tw
     noise = (sw * Tv.T @ Tv - cross - cross.T
              + Tw.T @ (np.trace(spp) * np.eye(3) - spp) @ Tw)
     out = 0.5 * ((H - noise) + (H - noise).T)
