@@ -1,6 +1,7 @@
 """Point-to-plane information and refinement inside a detected subspace."""
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from lili_odom import geometry
 from lili_odom.degeneracy.reference import ReferenceMap
@@ -297,3 +298,24 @@ def test_the_fit_noise_term_equals_its_per_point_sum():
                                atol=1e-8)
     np.testing.assert_allclose(geometry.hat([1.0, 2.0, 3.0]) @ [-2.0, 0.5, 4.0],
                                np.cross([1.0, 2.0, 3.0], [-2.0, 0.5, 4.0]))
+
+
+def test_a_tree_built_ahead_is_the_tree_of_the_current_map():
+    from lili_odom.pipeline.scan_matcher import insert_scan
+
+    rng = np.random.default_rng(3)
+    ref = ReferenceMap.from_points(rng.uniform(-10, 10, (3000, 3)), 1.0, 20)
+    q = rng.uniform(-10, 10, (200, 3))
+    ref.build_kdtree_ahead()
+    assert "_kdtree_future" in ref.__dict__
+    d_ahead, i_ahead = ref.kdtree.query(q, k=5)
+    d_now, i_now = cKDTree(ref.points).query(q, k=5)
+    np.testing.assert_array_equal(i_ahead, i_now)
+    # a map change discards the tree (and one started ahead): the next one has the new points
+    ref.build_kdtree_ahead()
+    insert_scan(ref, rng.uniform(10, 20, (500, 3)), np.eye(4))
+    ref.build_kdtree_ahead()
+    assert ref.kdtree.n == len(ref.points) > 3000
+    empty = ReferenceMap.from_points(np.zeros((0, 3)), 1.0, 20)
+    empty.build_kdtree_ahead()  # nothing to build: no thread, and no error
+    assert "_kdtree_future" not in empty.__dict__

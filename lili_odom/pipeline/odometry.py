@@ -24,7 +24,8 @@ measured offline is what runs on the robot. Per scan (``process_scan``):
 6. iSAM2 fuses IMU preintegration, the LiDAR registration with the degenerate directions
    removed, the LiDAR's own (Hessian-weighted) measurement inside them and the wheel
    increment only inside them (``FusionEstimator``);
-7. the local map is updated with the FUSED pose.
+7. the local map is updated with the FUSED pose, and the k-d tree of the next scan's plane
+   fits starts building in a background thread.
 
 Frames: the odometry frame is gravity-aligned at the first scan; poses are of base_link in it.
 Scan poses refer to the time of the scan's last point (KISS-ICP deskews to it).
@@ -439,6 +440,8 @@ class OdometryPipeline:
         self._start_worker()
         if self._worker is not None and self._worker.alive:
             self._worker.update_map(map_points, inserted)
+        if self.config.plane_refinement.enabled:  # the next scan's plane fits need the tree
+            self._matcher.reference.build_kdtree_ahead()
         timings["map"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_start
 
