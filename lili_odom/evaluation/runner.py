@@ -2,9 +2,7 @@
 
 :func:`run_bag` is what ``lili-odom run`` and the benchmarks call. It reads the bag in header-stamp
 order through the replay loop (:class:`~lili_odom.evaluation.replay.Replay`: the same
-:class:`~lili_odom.pipeline.feeder.MessageFeeder` as the node), reading ahead in a thread
-(:class:`~lili_odom.bagio.prefetch.Prefetch`) while a scan is processed, and writes into
-``out_dir``:
+:class:`~lili_odom.pipeline.feeder.MessageFeeder` as the node) and writes into ``out_dir``:
 
 * ``odometry/``: rosbag2 mcap with ``/lili_odom/odometry``, ``path``, degeneracy markers and JSON
   basis, ``/tf`` and the final local map;
@@ -104,7 +102,6 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
     Raises:
         UserError: unreadable bag, missing LiDAR topic, unusable ``out_dir``, no scan processed.
     """
-    from lili_odom.bagio.prefetch import Prefetch
     from lili_odom.bagio.reader import BagReader
     from lili_odom.bagio.tum import write_tum
     from lili_odom.bagio.writer import OutputBagWriter
@@ -140,7 +137,6 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
             OutputBagWriter(out_dir / "odometry", odom_frame=config.odom_frame,
                             base_frame=config.base_frame) as writer:
         bar = _Progress(reader.message_count, not progress, progress_label)
-        items = Prefetch(reader)  # the next messages are read while a scan is processed
 
         def record(out, _pipeline) -> None:
             dim = out.degeneracy.dimension if out.degeneracy is not None else 0
@@ -171,8 +167,7 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
         replay.on_output = record
         try:
             pipeline.start()  # the background detector process, before the first scan
-            with items:
-                replay.run(advancing(items), max_scans=max_scans)
+            replay.run(advancing(reader), max_scans=max_scans)
         finally:
             pipeline.close()  # the background detector process
         run.truth = replay.truth

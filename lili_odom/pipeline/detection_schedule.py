@@ -63,7 +63,8 @@ class DetectionScheduleConfig:
         background: run due detections in a separate process (module docstring); default
             True. False: every detection runs in the main loop and serves its own scan.
         background_lag: scans after the requesting one at which a background result is
-            applied (>= 1); default 2.
+            applied (>= 1); default 3 (a detection's 12 re-registrations take two to three
+            scan periods of a dense scan on two cores).
         background_timeout_s: longest wait for a background result [s]; beyond it the
             detector process counts as hung and detection moves into the main loop.
             Default 10.
@@ -75,7 +76,7 @@ class DetectionScheduleConfig:
     hold_distance_m: float = 1.0
     hold_warmup_m: float = 10.0
     background: bool = True
-    background_lag: int = 2
+    background_lag: int = 3
     background_timeout_s: float = 10.0
 
     def validate(self, prefix: str = "detection_schedule.") -> None:
