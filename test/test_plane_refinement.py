@@ -308,8 +308,8 @@ def test_a_tree_built_ahead_is_the_tree_of_the_current_map():
     q = rng.uniform(-10, 10, (200, 3))
     ref.build_kdtree_ahead()
     assert "_kdtree_future" in ref.__dict__
-    d_ahead, i_ahead = ref.kdtree.query(q, k=5)
-    d_now, i_now = cKDTree(ref.points).query(q, k=5)
+    _, i_ahead = ref.kdtree.query(q, k=5)
+    _, i_now = cKDTree(ref.points).query(q, k=5)
     np.testing.assert_array_equal(i_ahead, i_now)
     # a map change discards the tree (and one started ahead): the next one has the new points
     ref.build_kdtree_ahead()
