@@ -201,3 +201,13 @@ def test_fused_motion_inside_the_degenerate_direction_uses_the_calibrated_wheels
         out = est.update(t, step(x0), deg, wheel_delta=step(0.525))
         assert out is not None and out.used_wheel
     assert out.pose[0, 3] - x0 == pytest.approx(5.0, abs=0.05)  # uncalibrated: 5.25
+
+
+def test_chaining_says_whether_a_segment_is_open():
+    est = WheelScaleEstimator(WheelScaleConfig(steady_scans=10))
+    drive(est, 9, 0.1, 0.1)
+    assert not est.chaining  # not yet steady for steady_scans increments
+    drive(est, 1, 0.1, 0.1)
+    assert est.chaining
+    est.interrupt()
+    assert not est.chaining

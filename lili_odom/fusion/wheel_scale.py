@@ -331,6 +331,11 @@ class WheelScaleEstimator:
         return self._lidar_m
 
     @property
+    def chaining(self) -> bool:
+        """True while increments are chained into an open segment (after a steady start)."""
+        return self._segment is not None
+
+    @property
     def established(self) -> bool:
         """True once enough constrained travel was accepted for the estimate to apply."""
         return self._lidar_m >= self.config.min_distance_m and self._lidar_m > 0
