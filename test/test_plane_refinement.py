@@ -319,3 +319,36 @@ def test_a_tree_built_ahead_is_the_tree_of_the_current_map():
     empty = ReferenceMap.from_points(np.zeros((0, 3)), 1.0, 20)
     empty.build_kdtree_ahead()  # nothing to build: no thread, and no error
     assert "_kdtree_future" not in empty.__dict__
+
+
+def _tree_in_forked_child(ref: ReferenceMap, queue) -> None:
+    ref.build_kdtree_ahead()  # inherited from the parent: a tree the child cannot wait for
+    fresh = ReferenceMap.from_points(ref.points + 1.0, 1.0, 20)
+    fresh.build_kdtree_ahead()  # the parent's builder thread does not exist in the child
+    queue.put((ref.kdtree.n, fresh.kdtree.n))
+
+
+def test_a_forked_child_builds_its_own_trees():
+    """A process forked while a tree was being built ahead (a process pool's worker) neither
+    waits for the parent's thread nor uses its half-built tree."""
+    import multiprocessing as mp
+
+    if "fork" not in mp.get_all_start_methods():
+        pytest.skip("no fork on this platform")
+    rng = np.random.default_rng(4)
+    ref = ReferenceMap.from_points(rng.uniform(-10, 10, (3000, 3)), 1.0, 20)
+    ReferenceMap.from_points(rng.uniform(-10, 10, (100, 3)), 1.0, 20).build_kdtree_ahead()
+    ref.build_kdtree_ahead()
+    ctx = mp.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_tree_in_forked_child, args=(ref, queue), daemon=True)
+    child.start()
+    try:
+        got = queue.get(timeout=60)
+        child.join(timeout=10)
+    finally:
+        if child.is_alive():
+            child.terminate()
+    assert child.exitcode == 0
+    assert got == (len(ref.points), len(ref.points))
+    assert ref.kdtree.n == len(ref.points)

@@ -11,6 +11,7 @@ failure mode of KISS-ICP (no correspondences -> returns the initial guess unchan
 """
 from __future__ import annotations
 
+import os
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import cached_property
@@ -38,7 +39,8 @@ def kdtree_workers(n: int) -> int:
     return -1 if n >= THREADED_QUERY_POINTS else 1
 
 
-_tree_builder: ThreadPoolExecutor | None = None
+#: (pid, executor) of the thread that builds k-d trees ahead; a forked child makes its own.
+_tree_builder: tuple[int, ThreadPoolExecutor] | None = None
 
 
 def _build_kdtree(points: np.ndarray) -> cKDTree:
@@ -48,10 +50,13 @@ def _build_kdtree(points: np.ndarray) -> cKDTree:
 
 
 def _builder() -> ThreadPoolExecutor:
+    """This process's tree-building thread (a fork does not copy threads, so a child that
+    inherited the parent's executor would wait forever on it)."""
     global _tree_builder
-    if _tree_builder is None:
-        _tree_builder = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lili_odom_kdtree")
-    return _tree_builder
+    if _tree_builder is None or _tree_builder[0] != os.getpid():
+        _tree_builder = (os.getpid(),
+                         ThreadPoolExecutor(max_workers=1, thread_name_prefix="lili_odom_kdtree"))
+    return _tree_builder[1]
 
 
 class ReferenceMap:
@@ -97,8 +102,13 @@ class ReferenceMap:
         if "kdtree" in self.__dict__ or "_kdtree_future" in self.__dict__:
             return
         points = self.points
-        if len(points):
-            self.__dict__["_kdtree_future"] = _builder().submit(_build_kdtree, points)
+        if not len(points):
+            return
+        try:
+            future = _builder().submit(_build_kdtree, points)
+        except RuntimeError:  # the interpreter is shutting down: build on access
+            return
+        self.__dict__["_kdtree_future"] = (os.getpid(), future)
 
     @cached_property
     def points(self) -> np.ndarray:
@@ -109,8 +119,10 @@ class ReferenceMap:
     def kdtree(self) -> cKDTree:
         """scipy k-d tree of :attr:`points` (the one :meth:`build_kdtree_ahead` started, if
         any)."""
-        future: Future | None = self.__dict__.pop("_kdtree_future", None)
-        return future.result() if future is not None else _build_kdtree(self.points)
+        ahead: tuple[int, Future] | None = self.__dict__.pop("_kdtree_future", None)
+        if ahead is not None and ahead[0] == os.getpid():  # not one a parent process started
+            return ahead[1].result()
+        return _build_kdtree(self.points)
 
     @cached_property
     def spacing(self) -> float:
