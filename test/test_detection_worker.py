@@ -141,9 +141,13 @@ def test_the_pipeline_applies_background_results_lag_scans_later():
 
 
 def test_the_pipeline_detects_in_its_main_loop_when_the_worker_is_gone():
+    """Lag 2, a detection due every other scan: whether the child answered scan 2's request
+    before it was killed or not, its death is noticed by scan 7 at the latest, and scans 5-9
+    hold at least two detections of the main loop."""
     room = closed_room(seed=1)
     cfg = PipelineConfig(method="hessian")
     cfg.detection_schedule.max_reuse = 1
+    cfg.detection_schedule.background_lag = 2
     cfg.detection_schedule.background_timeout_s = 5
     pipe = OdometryPipeline(cfg)
     outs = [pipe.process_scan(Scan(100.0 + 0.1 * i, room, None)) for i in range(4)]
