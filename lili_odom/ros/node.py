@@ -42,7 +42,7 @@ processed with exactly the IMU/wheel data the runner would use: it waits until t
 covering its sweep end have arrived (at most ``pipeline.sensor_wait_s`` of stamp time, or the
 same in wall time when the other inputs fall silent). The pipeline runs its degeneracy
 detector in a child process (``pipeline.detection_schedule.background``), stopped at
-shutdown.
+shutdown, and builds the next scan's plane-fit k-d tree in a thread of its own.
 
 Scan-drop policy: the cloud subscription keeps ``scan_subscription_depth`` samples, so clouds
 arriving while the executor is busy still reach the callback, which only queues them. At most
