@@ -13,7 +13,8 @@ from pathlib import Path
 
 __all__ = ["DEFAULT_RESOLUTIONS", "DEFAULT_PIECE", "format_resolution", "parse_resolution",
            "suite_resolutions", "default_resolutions", "piece_bag", "warm_file_cache",
-           "add_piece_arguments", "piece_bags", "piece_command"]
+           "add_piece_arguments", "piece_bags", "piece_command", "add_window_arguments",
+           "window_bag", "window_command"]
 
 #: Resolutions measured besides the suite's own: 32, 64 and 128 beams, 512 to 2048 columns.
 DEFAULT_RESOLUTIONS: tuple[tuple[int, int], ...] = (
@@ -135,3 +136,43 @@ def piece_command(module: str, args, extra: str = "") -> str:
             + (f" --seed {args.seed}" if args.seed else "")
             + (" --resolutions " + " ".join(args.resolutions) if args.resolutions else "")
             + extra)
+
+
+def add_window_arguments(ap, scenario: str, duration: float, resolution: str = "32x512") -> None:
+    """Add ``--scenario --start --duration --seed --resolution`` (one window of a scenario at
+    one resolution, for a study) with these defaults to the argparse parser ``ap``."""
+    ap.add_argument("--scenario", default=scenario, help=f"scenario of the suite (default {scenario})")
+    ap.add_argument("--start", type=float, default=0.0, help="window start [s of the trial]")
+    ap.add_argument("--duration", type=float, default=duration,
+                    help=f"window length [s] (default {duration:g})")
+    ap.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
+    ap.add_argument("--resolution", default=resolution,
+                    help=f"ROWSxCOLS (default {resolution})")
+
+
+def window_bag(ap, args):
+    """The scenario, the resolution (rows, cols) and the cached bag that the arguments of
+    :func:`add_window_arguments` name; a bad value ends the program through ``ap.error``."""
+    from lili_odom.suite.scenario import load_scenarios
+
+    if not args.duration > 0:
+        ap.error("--duration must be positive")
+    try:
+        res = parse_resolution(args.resolution)
+        (scenario,) = load_scenarios([args.scenario], measure=False)
+        bag = piece_bag(args.scenario, args.start, args.duration, res, args.seed)
+    except ValueError as exc:
+        ap.error(str(exc))
+    return scenario, res, bag
+
+
+def window_command(module: str, args, scenario: str, duration: float,
+                   resolution: str = "32x512") -> str:
+    """``python -m MODULE`` with the options of :func:`add_window_arguments` that differ from
+    the given defaults."""
+    return (f"python -m {module}"
+            + (f" --scenario {args.scenario}" if args.scenario != scenario else "")
+            + (f" --start {args.start:g}" if args.start else "")
+            + (f" --duration {args.duration:g}" if args.duration != duration else "")
+            + (f" --seed {args.seed}" if args.seed else "")
+            + (f" --resolution {args.resolution}" if args.resolution != resolution else ""))

@@ -25,7 +25,8 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 from benchmarks._common import RESULTS, config_with, machine_info, write_results
-from benchmarks._pieces import format_resolution, parse_resolution, piece_bag
+from benchmarks._pieces import (add_window_arguments, format_resolution, window_bag,
+                                window_command)
 
 #: Settings compared (overrides below ``pipeline.``).
 SETTINGS = {
@@ -98,21 +99,11 @@ def markdown(report: dict, command: str) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenario", default="ramp_drift")
-    ap.add_argument("--start", type=float, default=0.0, help="window start [s of the trial]")
-    ap.add_argument("--duration", type=float, default=18.0, help="window length [s]")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--resolution", default="32x512", help="ROWSxCOLS (default 32x512)")
+    add_window_arguments(ap, "ramp_drift", 18.0)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default=RESULTS)
     args = ap.parse_args(argv)
-    if not args.duration > 0:
-        ap.error("--duration must be positive")
-    try:
-        res = parse_resolution(args.resolution)
-        bag = piece_bag(args.scenario, args.start, args.duration, res, args.seed)
-    except ValueError as exc:
-        ap.error(str(exc))
+    _, res, bag = window_bag(ap, args)
     with ProcessPoolExecutor(max(1, args.jobs)) as pool:
         results = list(pool.map(run_setting, [(bag, o) for o in SETTINGS.values()]))
     report = {"piece": {"scenario": args.scenario, "start_s": args.start,
@@ -120,12 +111,7 @@ def main(argv=None) -> int:
                         "resolution": format_resolution(res)},
               "machine": machine_info(),
               "settings": {n: summarise(r) for n, r in zip(SETTINGS, results)}}
-    command = ("python -m benchmarks.studies.imu_lever_arm"
-               + (f" --scenario {args.scenario}" if args.scenario != "ramp_drift" else "")
-               + (f" --start {args.start:g}" if args.start else "")
-               + (f" --duration {args.duration:g}" if args.duration != 18.0 else "")
-               + (f" --seed {args.seed}" if args.seed else "")
-               + (f" --resolution {args.resolution}" if args.resolution != "32x512" else ""))
+    command = window_command("benchmarks.studies.imu_lever_arm", args, "ramp_drift", 18.0)
     print(f"wrote {write_results(args.out, 'imu_lever_arm', markdown(report, command), report)}")
     return 0
 

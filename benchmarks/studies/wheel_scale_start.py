@@ -20,7 +20,8 @@ import argparse
 import numpy as np
 
 from benchmarks._common import RESULTS, config_with, machine_info, write_results
-from benchmarks._pieces import format_resolution, parse_resolution, piece_bag
+from benchmarks._pieces import (add_window_arguments, format_resolution, window_bag,
+                                window_command)
 
 
 def trace(bag) -> dict:
@@ -111,24 +112,11 @@ def markdown(report: dict, command: str) -> str:
 
 
 def main(argv=None) -> int:
-    from lili_odom.suite.scenario import load_scenarios
-
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenario", default="parking_lot")
-    ap.add_argument("--start", type=float, default=0.0, help="window start [s of the trial]")
-    ap.add_argument("--duration", type=float, default=40.0, help="window length [s]")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--resolution", default="32x512", help="ROWSxCOLS (default 32x512)")
+    add_window_arguments(ap, "parking_lot", 40.0)
     ap.add_argument("--out", default=RESULTS)
     args = ap.parse_args(argv)
-    if not args.duration > 0:
-        ap.error("--duration must be positive")
-    try:
-        res = parse_resolution(args.resolution)
-        (scenario,) = load_scenarios([args.scenario], measure=False)
-        bag = piece_bag(args.scenario, args.start, args.duration, res, args.seed)
-    except ValueError as exc:
-        ap.error(str(exc))
+    scenario, res, bag = window_bag(ap, args)
     error = scenario.errors.wheel_scale_error
     true_scale = None if error is None else 1.0 + float(error)
     report = {"piece": {"scenario": args.scenario, "start_s": args.start,
@@ -136,12 +124,7 @@ def main(argv=None) -> int:
                         "resolution": format_resolution(res)},
               "machine": machine_info(),
               "summary": summarise(trace(bag), true_scale)}
-    command = ("python -m benchmarks.studies.wheel_scale_start"
-               + (f" --scenario {args.scenario}" if args.scenario != "parking_lot" else "")
-               + (f" --start {args.start:g}" if args.start else "")
-               + (f" --duration {args.duration:g}" if args.duration != 40.0 else "")
-               + (f" --seed {args.seed}" if args.seed else "")
-               + (f" --resolution {args.resolution}" if args.resolution != "32x512" else ""))
+    command = window_command("benchmarks.studies.wheel_scale_start", args, "parking_lot", 40.0)
     print(f"wrote {write_results(args.out, 'wheel_scale_start', markdown(report, command), report)}")
     return 0
 
