@@ -30,6 +30,7 @@ setup(
         "setuptools",
         "numpy>=1.24",
         "scipy>=1.10",
+        "pandas>=1.5",
         "kiss-icp>=1.2,<2",
         "gtsam>=4.2",
         "rosbags>=0.10",

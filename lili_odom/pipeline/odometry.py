@@ -342,7 +342,7 @@ class OdometryPipeline:
         timings["predict"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
-        frame, map_points, source = self._matcher.preprocess(points, times, sweep_motion)
+        map_points, source = self._matcher.preprocess(points, times, sweep_motion)
         timings["deskew"] = time.perf_counter() - t0
         if len(source) < 10:
             self._skip("skipped_too_few_points", "%d points left after voxelisation at %.3f",

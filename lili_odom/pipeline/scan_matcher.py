@@ -9,7 +9,9 @@ KISS-ICP building blocks used as KISS-ICP uses them: ``Preprocessor`` (range fil
 normalises per-point times to [0, 1] itself and deskews to the time of the *last* point),
 ``voxel_down_sample`` (0.5 voxel for the map, 1.5 voxel for registration), ``AdaptiveThreshold``
 (gate 3 sigma, kernel sigma) and ``Registration.align_points_to_map`` (through the guarded
-wrapper, so no invalid pose ever reaches Sophus).
+wrapper, so no invalid pose ever reaches Sophus). One difference from KISS-ICP's pipeline: the
+points to keep are chosen on the raw sweep and only they are deskewed
+(:mod:`lili_odom.pipeline.voxel_select`).
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ from kiss_icp.voxelization import voxel_down_sample
 
 from lili_odom.degeneracy.reference import AlignmentResult, GuardedRegistration, ReferenceMap
 from lili_odom.geometry import is_valid_pose, orthonormalize
+from lili_odom.pipeline.voxel_select import first_in_voxel
 
 
 @dataclass
@@ -102,8 +105,14 @@ class ScanMatcher:
 
     def preprocess(
         self, points: np.ndarray, times: np.ndarray | None, sweep_motion: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Range-filter, deskew and voxelise a sweep.
+
+        The first point of each 0.5-voxel cell of the raw sweep is kept
+        (:func:`~lili_odom.pipeline.voxel_select.first_in_voxel`, with the points of the
+        first and last time, which fix KISS-ICP's time normalisation), and only those are
+        range-filtered and deskewed: each kept point is deskewed exactly as KISS-ICP's
+        ``Preprocessor`` deskews it in the whole sweep.
 
         Args:
             points: (N, 3) finite points in the LiDAR frame [m].
@@ -112,9 +121,9 @@ class ScanMatcher:
                 (``T_lidar(t_first)^-1 T_lidar(t_last)``).
 
         Returns:
-            (frame, map_points, source): the deskewed frame in the LiDAR frame at the time of
-            the last point, its 0.5-voxel downsampling (to insert in the map) and its 1.5-voxel
-            downsampling (to register).
+            (map_points, source): the kept points deskewed into the LiDAR frame at the time of
+            the last point (to insert in the map), and those downsampled to 1.5 voxel (to
+            register).
         """
         times = None if times is None else np.asarray(times, dtype=float).reshape(-1)
         if (times is None or len(times) != len(points) or len(times) == 0
@@ -124,11 +133,15 @@ class ScanMatcher:
             # inf (finite times near +-1e308). An empty time array skips deskewing.
             times = np.zeros(0)
         motion = orthonormalize(sweep_motion) if is_valid_pose(sweep_motion, 1e-3) else np.eye(4)
-        frame = self._preprocessor.preprocess(points, times, motion)
         v = self.config.voxel
-        map_points = voxel_down_sample(frame, 0.5 * v)
+        keep = first_in_voxel(points, 0.5 * v)
+        if len(times):
+            keep = np.union1d(keep, [np.argmin(times), np.argmax(times)])
+            times = times[keep]
+        map_points = np.asarray(
+            self._preprocessor.preprocess(np.asarray(points)[keep], times, motion))
         source = voxel_down_sample(map_points, 1.5 * v)
-        return frame, map_points, source
+        return map_points, source
 
     def register(self, source: np.ndarray, guess: np.ndarray) -> AlignmentResult:
         """Align ``source`` (LiDAR frame) to the map from ``guess`` (``T_odom_lidar``).
