@@ -136,7 +136,8 @@ class ScanMatcher:
         v = self.config.voxel
         keep = first_in_voxel(points, 0.5 * v)
         if len(times):
-            keep = np.union1d(keep, [np.argmin(times), np.argmax(times)])
+            ends = np.setdiff1d([np.argmin(times), np.argmax(times)], keep)
+            keep = np.concatenate([keep, ends])
             times = times[keep]
         map_points = np.asarray(
             self._preprocessor.preprocess(np.asarray(points)[keep], times, motion))

@@ -22,14 +22,20 @@ __all__ = ["first_in_voxel"]
 #: bits per axis of a packed cell index (cells within +-2**20 of the origin are packed exactly)
 _BITS = 21
 _HALF = 1 << (_BITS - 1)
+#: 2**64 / golden ratio, odd: multiplying by it mod 2**64 scatters neighbouring keys
+_GOLDEN = 0x9E3779B97F4A7C15
 
 
 def first_in_voxel(points: np.ndarray, voxel: float) -> np.ndarray:
-    """Indices (ascending) of the first point of each ``voxel``-sized cell of ``points``.
+    """Indices of the first point of each ``voxel``-sized cell of ``points``.
 
-    Cells are ``floor(p / voxel)``. Exact for cells within 2**20 voxels of the origin (about
-    500 km at 0.5 m); with points beyond, or a voxel that is not a positive finite number,
-    every index is returned (nothing is preselected). ``points`` must be finite.
+    Cells are ``floor(p / voxel)``. The indices come in an order set by a hash of their cells,
+    unrelated to the input order, as KISS-ICP's ``voxel_down_sample`` returns its points (from
+    its hash map): a later voxelisation that keeps the first point of a coarser cell then
+    keeps an arbitrary one, not always the one from the sweep's first rows. Exact for cells
+    within 2**20 voxels of the origin (about 500 km at 0.5 m); with points beyond, or a voxel
+    that is not a positive finite number, every index is returned in input order (nothing is
+    preselected). ``points`` must be finite.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = len(points)
@@ -41,4 +47,7 @@ def first_in_voxel(points: np.ndarray, voxel: float) -> np.ndarray:
     c = cells.astype(np.int64) + _HALF
     key = (c[:, 0] << (2 * _BITS)) | (c[:, 1] << _BITS) | c[:, 2]
     # hash-based first occurrence (linear time; a sort-based np.unique costs twice as much)
-    return np.flatnonzero(~pd.Series(key, copy=False).duplicated(keep="first").to_numpy())
+    first = np.flatnonzero(~pd.Series(key, copy=False).duplicated(keep="first").to_numpy())
+    # Fibonacci hashing of the cell keys (wrapping uint64 product) sets the order
+    scrambled = key[first].astype(np.uint64) * np.uint64(_GOLDEN)
+    return first[np.argsort(scrambled, kind="stable")]
