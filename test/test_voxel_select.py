@@ -46,14 +46,29 @@ def test_first_in_voxel_order_is_unrelated_to_the_input_order():
     assert 0.2 < np.mean(coarse[:, 2]) < 0.8
 
 
-def test_first_in_voxel_keeps_everything_it_cannot_pack():
+def test_first_in_voxel_makes_no_choice_where_it_cannot_pack_the_cells():
     pts = np.zeros((5, 3))
     pts[2] = [1e7, 0.0, 0.0]  # 2e7 cells of 0.5 m from the origin: beyond the packed range
-    np.testing.assert_array_equal(first_in_voxel(pts, 0.5), np.arange(5))
-    np.testing.assert_array_equal(first_in_voxel(np.zeros((4, 3)), float("nan")), np.arange(4))
-    np.testing.assert_array_equal(first_in_voxel(np.zeros((4, 3)), 0.0), np.arange(4))
+    assert first_in_voxel(pts, 0.5) is None
+    pts[2] = [np.nan, 0.0, 0.0]
+    assert first_in_voxel(pts, 0.5) is None
+    assert first_in_voxel(np.zeros((4, 3)), float("nan")) is None
+    assert first_in_voxel(np.zeros((4, 3)), 0.0) is None
     assert first_in_voxel(np.zeros((0, 3)), 0.5).shape == (0,)
     np.testing.assert_array_equal(first_in_voxel(np.zeros((4, 3)), 0.5), [0])
+
+
+def test_preprocess_far_points_voxelise_after_the_deskew():
+    """Points beyond the packed range take KISS-ICP's path: deskew all, then voxelise."""
+    pts, times = _sweep()
+    pts = np.vstack([pts, [[6e5, 0.0, 0.0]]])
+    times = np.append(times, 0.05)
+    motion = geometry.exp(np.array([0.15, 0.0, 0.0, 0.0, 0.0, 0.05]))
+    matcher = ScanMatcher(ScanMatcherConfig(max_range=1e6, min_range=1.0, voxel_size=1.0))
+    map_points, source = matcher.preprocess(pts, times, motion)
+    whole = np.asarray(Preprocessor(1e6, 1.0, True, 0).preprocess(pts, times, motion))
+    expected = voxel_down_sample(whole, 0.5 * matcher.config.voxel)
+    np.testing.assert_array_equal(_rows(map_points), _rows(expected))
 
 
 def _sweep(n_columns: int = 512, n_rows: int = 16) -> tuple[np.ndarray, np.ndarray]:

@@ -134,13 +134,17 @@ class ScanMatcher:
             times = np.zeros(0)
         motion = orthonormalize(sweep_motion) if is_valid_pose(sweep_motion, 1e-3) else np.eye(4)
         v = self.config.voxel
+        points = np.asarray(points)
         keep = first_in_voxel(points, 0.5 * v)
-        if len(times):
-            ends = np.setdiff1d([np.argmin(times), np.argmax(times)], keep)
-            keep = np.concatenate([keep, ends])
-            times = times[keep]
-        map_points = np.asarray(
-            self._preprocessor.preprocess(np.asarray(points)[keep], times, motion))
+        if keep is None:  # cells that cannot be packed: KISS-ICP's order of work
+            frame = self._preprocessor.preprocess(points, times, motion)
+            map_points = np.asarray(voxel_down_sample(frame, 0.5 * v))
+        else:
+            if len(times):
+                ends = np.setdiff1d([np.argmin(times), np.argmax(times)], keep)
+                keep = np.concatenate([keep, ends])
+                times = times[keep]
+            map_points = np.asarray(self._preprocessor.preprocess(points[keep], times, motion))
         source = voxel_down_sample(map_points, 1.5 * v)
         return map_points, source
 

@@ -26,24 +26,25 @@ _HALF = 1 << (_BITS - 1)
 _GOLDEN = 0x9E3779B97F4A7C15
 
 
-def first_in_voxel(points: np.ndarray, voxel: float) -> np.ndarray:
+def first_in_voxel(points: np.ndarray, voxel: float) -> np.ndarray | None:
     """Indices of the first point of each ``voxel``-sized cell of ``points``.
 
     Cells are ``floor(p / voxel)``. The indices come in an order set by a hash of their cells,
     unrelated to the input order, as KISS-ICP's ``voxel_down_sample`` returns its points (from
     its hash map): a later voxelisation that keeps the first point of a coarser cell then
-    keeps an arbitrary one, not always the one from the sweep's first rows. Exact for cells
-    within 2**20 voxels of the origin (about 500 km at 0.5 m); with points beyond, or a voxel
-    that is not a positive finite number, every index is returned in input order (nothing is
-    preselected). ``points`` must be finite.
+    keeps an arbitrary one, not always the one from the sweep's first rows.
+
+    Returns None (no choice made) for a voxel that is not a positive finite number and for
+    points more than 2**20 voxels from the origin (about 500 km at 0.5 m) or not finite,
+    whose cells are not packed exactly.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    n = len(points)
-    if n == 0 or not (np.isfinite(voxel) and voxel > 0):
-        return np.arange(n)
-    cells = np.floor(points * (1.0 / voxel))
-    if not np.all(np.abs(cells) < _HALF):
-        return np.arange(n)
+    if not (np.isfinite(voxel) and voxel > 0):
+        return None
+    with np.errstate(invalid="ignore", over="ignore"):
+        cells = np.floor(points * (1.0 / voxel))
+        if not np.all(np.abs(cells) < _HALF):  # False for NaN too
+            return None
     c = cells.astype(np.int64) + _HALF
     key = (c[:, 0] << (2 * _BITS)) | (c[:, 1] << _BITS) | c[:, 2]
     # hash-based first occurrence (linear time; a sort-based np.unique costs twice as much)
