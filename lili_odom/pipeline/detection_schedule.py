@@ -50,10 +50,11 @@ from lili_odom.degeneracy.result import DegeneracyResult
 class DetectionScheduleConfig:
     """Attributes:
         max_reuse: consecutive scans that may reuse one detection (0: detect every scan).
-            Default 6: at the Husky's 0.8-1 m/s the 0.5 m bound ends a reuse after 5-6
-            scans, so the detector runs about once per 0.5 m of travel (at least every 7th
+            Default 8: at the Husky's 0.8-1 m/s the 0.75 m bound ends a reuse after 7-8
+            scans, so the detector runs about once per 0.75 m of travel (at least every 9th
             scan when slower).
-        reuse_distance_m: re-detect once the sensor moved this far from the detection [m].
+        reuse_distance_m: re-detect once the sensor moved this far from the detection [m];
+            default 0.75.
         reuse_angle_deg: re-detect once the sensor turned this much from the detection [deg].
         hold_distance_m: a degenerate subspace is merged into the following results until
             the sensor moved this far from its detection [m]; 0 = no hold.
@@ -70,8 +71,8 @@ class DetectionScheduleConfig:
             Default 10.
     """
 
-    max_reuse: int = 6
-    reuse_distance_m: float = 0.5
+    max_reuse: int = 8
+    reuse_distance_m: float = 0.75
     reuse_angle_deg: float = 5.0
     hold_distance_m: float = 1.0
     hold_warmup_m: float = 10.0
