@@ -42,7 +42,7 @@ def first_in_voxel(points: np.ndarray, voxel: float) -> np.ndarray | None:
     if not (np.isfinite(voxel) and voxel > 0):
         return None
     with np.errstate(invalid="ignore", over="ignore"):
-        cells = np.floor(points * (1.0 / voxel))
+        cells = np.floor(points / voxel)  # as KISS-ICP divides (not by the reciprocal)
         if not np.all(np.abs(cells) < _HALF):  # False for NaN too
             return None
     c = cells.astype(np.int64) + _HALF
