@@ -341,10 +341,16 @@ def pose_stamped_msg(f: MessageFactory, t: float, T: np.ndarray, frame_id: str) 
 def path_msg(f: MessageFactory, poses: Iterable[tuple[float, np.ndarray]], frame_id: str,
              stamp: float | None = None) -> Any:
     """``[(stamp, 4x4)]`` -> ``nav_msgs/Path``; header stamp = last pose's unless given."""
-    items = [pose_stamped_msg(f, t, T, frame_id) for t, T in poses]
+    return path_of(f, [pose_stamped_msg(f, t, T, frame_id) for t, T in poses], frame_id, stamp)
+
+
+def path_of(f: MessageFactory, pose_msgs: list, frame_id: str, stamp: float | None = None) -> Any:
+    """``nav_msgs/Path`` of ``geometry_msgs/PoseStamped`` messages built before (a live path
+    builds each pose's message once, not at every publication); header stamp = last pose's
+    unless given."""
     if stamp is None:
-        stamp = stamp_seconds(items[-1].header) if items else 0.0
-    return f.new("nav_msgs/msg/Path", header=header_msg(f, stamp, frame_id), poses=items)
+        stamp = stamp_seconds(pose_msgs[-1].header) if pose_msgs else 0.0
+    return f.new("nav_msgs/msg/Path", header=header_msg(f, stamp, frame_id), poses=pose_msgs)
 
 
 def string_msg(f: MessageFactory, text: str) -> Any:

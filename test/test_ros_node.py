@@ -123,7 +123,12 @@ def test_one_odometry_per_scan(harness_factory):
     basis = json.loads(h.received["basis"][-1].data)
     assert basis["dimension"] == 1 and basis["basis"][0]["translation"] == [1.0, 0.0, 0.0]
     assert h.received["map"][0].width == 2 and h.received["map"][0].header.frame_id == "test_odom"
-    assert len(h.received["path"][-1].poses) == n
+    path = h.received["path"][-1].poses
+    assert len(path) == n
+    assert [round(q.pose.position.x) for q in path] == list(range(1, n + 1))
+    assert [round(M.stamp_seconds(q.header), 6) for q in path] == \
+        [round(10.0 + 0.1 * k, 6) for k in range(n)]
+    assert {q.header.frame_id for q in path} == {"test_odom"}
 
 
 def test_slow_pipeline_drops_older_pending_scans(harness_factory):
