@@ -30,9 +30,9 @@ OUTPUT_TOPICS: dict[str, str] = {
 }
 
 
-def thin_poses(poses: list[tuple[float, np.ndarray]], limit: int
-               ) -> list[tuple[float, np.ndarray]]:
-    """At most ``limit`` evenly spaced entries of ``poses``, always including the last."""
+def thin_poses(poses: list[tuple[float, Any]], limit: int) -> list[tuple[float, Any]]:
+    """At most ``limit`` evenly spaced entries of ``poses`` (``(stamp, pose)``, the pose a 4x4
+    array or a message), always including the last."""
     if len(poses) <= limit:
         return list(poses)
     idx = np.unique(np.linspace(0, len(poses) - 1, limit).round().astype(int))
