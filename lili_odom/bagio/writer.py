@@ -10,7 +10,7 @@ Log times are the header stamps, so the bag replays in the data's own time.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -21,6 +21,8 @@ from lili_odom.pipeline.types import OdometryOutput
 
 __all__ = ["OutputBagWriter", "OUTPUT_TOPICS", "thin_poses"]
 
+_Entry = TypeVar("_Entry")
+
 OUTPUT_TOPICS: dict[str, str] = {
     "odometry": "nav_msgs/msg/Odometry",
     "path": "nav_msgs/msg/Path",
@@ -30,9 +32,9 @@ OUTPUT_TOPICS: dict[str, str] = {
 }
 
 
-def thin_poses(poses: list[tuple[float, Any]], limit: int) -> list[tuple[float, Any]]:
-    """At most ``limit`` evenly spaced entries of ``poses`` (``(stamp, pose)``, the pose a 4x4
-    array or a message), always including the last."""
+def thin_poses(poses: list[_Entry], limit: int) -> list[_Entry]:
+    """At most ``limit`` evenly spaced entries of ``poses`` (any entries, e.g. ``(stamp,
+    4x4)`` or pose messages), always including the last."""
     if len(poses) <= limit:
         return list(poses)
     idx = np.unique(np.linspace(0, len(poses) - 1, limit).round().astype(int))

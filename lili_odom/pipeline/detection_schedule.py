@@ -64,8 +64,8 @@ class DetectionScheduleConfig:
         background: run due detections in a separate process (module docstring); default
             True. False: every detection runs in the main loop and serves its own scan.
         background_lag: scans after the requesting one at which a background result is
-            applied (>= 1); default 3 (a detection's 12 re-registrations take two to three
-            scan periods of a dense scan on two cores).
+            applied (>= 1); default 3 (``docs/performance.md``, "Detection in the
+            background").
         background_timeout_s: longest wait for a background result [s]; beyond it the
             detector process counts as hung and detection moves into the main loop.
             Default 10.

@@ -1,14 +1,12 @@
 """Choose one point per voxel before deskewing, so that only the points kept are deskewed.
 
-The odometry keeps one point per ``0.5 voxel`` cell of a sweep (the map points) and deskews
-every point it keeps. KISS-ICP's pipeline deskews the whole sweep first (one SE(3)
-exponential per point) and then voxelises it; at 128 x 1024 that is 131 k exponentials for
-about 4 k points kept. :func:`first_in_voxel` picks the first point of each cell of the
-*raw* sweep instead (KISS-ICP's rule, first point in input order), so the deskew runs on the
-points kept only (:meth:`lili_odom.pipeline.scan_matcher.ScanMatcher.preprocess`). The cells
-are those of the raw positions: each kept point is deskewed exactly, but which point of a
-cell is kept, and how many cells there are, follow the raw sweep (as many as the deskewed
-sweep's, give or take a few percent where the sensor moved during the sweep).
+The odometry keeps one point per ``0.5 voxel`` cell of a sweep (the map points).
+:func:`first_in_voxel` picks the first point of each cell of the *raw* sweep (KISS-ICP's
+rule, first point in input order), so the deskew runs on the points kept only
+(:meth:`lili_odom.pipeline.scan_matcher.ScanMatcher.preprocess`), instead of on the whole
+sweep before voxelising it as KISS-ICP's pipeline does. The cells are those of the raw
+positions: each kept point is deskewed exactly, but which point of a cell is kept, and how
+many cells there are, follow the raw sweep. Cost and effect: ``docs/performance.md``.
 
 Points (N, 3) in any frame [m]; ``voxel`` [m].
 """
@@ -47,7 +45,7 @@ def first_in_voxel(points: np.ndarray, voxel: float) -> np.ndarray | None:
             return None
     c = cells.astype(np.int64) + _HALF
     key = (c[:, 0] << (2 * _BITS)) | (c[:, 1] << _BITS) | c[:, 2]
-    # hash-based first occurrence (linear time; a sort-based np.unique costs twice as much)
+    # hash-based first occurrence (pandas), linear in the points
     first = np.flatnonzero(~pd.Series(key, copy=False).duplicated(keep="first").to_numpy())
     # Fibonacci hashing of the cell keys (wrapping uint64 product) sets the order
     scrambled = key[first].astype(np.uint64) * np.uint64(_GOLDEN)

@@ -197,8 +197,8 @@ class LiliOdomNode(Node):
         self._scans = ScanQueue(int(self.p["scan_queue_size"]))
         self._inputs = SampleBuffer(maxlen=30000)  # (topic, msg): IMU, wheel, /tf_static
         self._pending_since: float | None = None
-        # (stamp, PoseStamped of T_odom_base): each pose's message is built once
-        self._path: list[tuple[float, Any]] = []
+        # PoseStamped of each published T_odom_base, built once when it is published
+        self._path: list[Any] = []
         self._last_stamp = -float("inf")
         self._last_path_stamp = -float("inf")
         self._last_map_stamp = -float("inf")
@@ -399,12 +399,12 @@ class LiliOdomNode(Node):
             else:
                 tf = (out.stamp, frame, p["base_frame"], out.pose)
             self.pub_tf.publish(M.tf_message(f, [tf]))
-        self._path.append((out.stamp, M.pose_stamped_msg(f, out.stamp, out.pose, frame)))
+        self._path.append(M.pose_stamped_msg(f, out.stamp, out.pose, frame))
         if out.stamp - self._last_path_stamp >= float(p["path_period"]):
             from lili_odom.bagio.writer import thin_poses
 
             poses = thin_poses(self._path, int(p["path_max_poses"]))
-            self.pub_path.publish(M.path_of(f, [m for _, m in poses], frame, out.stamp))
+            self.pub_path.publish(M.path_of(f, poses, frame, out.stamp))
             self._last_path_stamp = out.stamp
         if len(self._path) > 4 * int(p["path_max_poses"]):  # bound memory on long runs
             from lili_odom.bagio.writer import thin_poses
