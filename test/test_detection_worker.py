@@ -88,6 +88,7 @@ def test_a_dead_worker_reports_and_does_not_block(corridor):
     scans, poses, scan = corridor
     worker = DetectionWorker(partial(ZhangDetector, ZhangConfig()), VOXEL, MAX_RANGE,
                              PER_VOXEL, timeout_s=5)
+    assert worker.ready()
     worker._process.kill()
     worker._process.join(5)
     worker.submit(1, scan, poses[0], poses[0])
@@ -152,6 +153,7 @@ def test_the_pipeline_detects_in_its_main_loop_when_the_worker_is_gone():
     pipe = OdometryPipeline(cfg)
     outs = [pipe.process_scan(Scan(100.0 + 0.1 * i, room, None)) for i in range(4)]
     assert pipe.counters["detections_background"] == 1
+    assert pipe._worker.ready()
     pipe._worker._process.kill()
     outs += [pipe.process_scan(Scan(100.0 + 0.1 * i, room, None)) for i in range(4, 10)]
     assert all(o is not None and o.degeneracy.ok for o in outs[1:])

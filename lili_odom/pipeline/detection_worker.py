@@ -25,7 +25,9 @@ from __future__ import annotations
 
 import logging
 import multiprocessing as mp
+import pickle
 import queue
+import threading
 import time
 import weakref
 from typing import Any, Callable
@@ -112,9 +114,13 @@ class DetectionWorker:
         self.timeout_s = float(timeout_s)
         self._args = (make_detector, float(voxel), float(max_range), int(max_points_per_voxel))
         self._process = None
+        self._finalizer = None
+        self._starter: threading.Thread | None = None
+        self._start_error = ""
         self.alive = True
         self.failure = ""
         try:
+            pickle.dumps(self._args)  # what the child gets: fail here, not in the thread
             ctx = _context()
             self._requests, self._replies = ctx.Queue(), ctx.Queue()
             # a dead child cannot drain the pipe: never wait for the feeder at close or exit
@@ -122,15 +128,46 @@ class DetectionWorker:
             self._process = ctx.Process(target=_serve, args=(self._requests, self._replies,
                                                              *self._args),
                                         name="lili_odom_detector", daemon=True)
-            self._process.start()
         except Exception as exc:  # noqa: BLE001 - e.g. an unpicklable factory: no process
             self._process = None
             self._fail(f"could not start the detector process: {exc}")
             return
+        # Starting the child waits for the forkserver to import the detector's modules (most
+        # of a second): done in a thread, so the caller goes on meanwhile. Requests queue up
+        # until the child reads them.
+        self._starter = threading.Thread(target=self._start, name="lili_odom_detector_start",
+                                         daemon=True)
+        self._starter.start()
+
+    def _start(self) -> None:
+        try:
+            self._process.start()
+        except Exception as exc:  # noqa: BLE001 - e.g. no forkserver process
+            self._start_error = f"could not start the detector process: {exc}"
+            return
         self._finalizer = weakref.finalize(self, _stop, self._process, self._requests)
 
+    def _started(self, wait: bool) -> bool:
+        """False when the child could not be started (the worker is then closed); with
+        ``wait`` False, True while it is still starting."""
+        starter = self._starter
+        if starter is not None:
+            if not wait and starter.is_alive():
+                return True
+            starter.join()
+            self._starter = None
+        if self._start_error:
+            self._fail(self._start_error)
+            return False
+        return True
+
+    def ready(self) -> bool:
+        """Wait until the child process runs; False when it could not be started or the
+        worker is closed."""
+        return self.alive and self._started(wait=True)
+
     def _send(self, message: tuple) -> None:
-        if not self.alive:
+        if not (self.alive and self._started(wait=False)):
             return
         try:
             self._requests.put(message)
@@ -162,7 +199,7 @@ class DetectionWorker:
         discarded. None when the detection raised (``failure`` says why), or when the child
         died or did not answer within ``timeout_s`` (the worker is then closed and ``alive``
         is False)."""
-        if not self.alive:
+        if not (self.alive and self._started(wait=True)):
             return None
         deadline = time.monotonic() + self.timeout_s
         while True:
@@ -197,5 +234,8 @@ class DetectionWorker:
 
     def close(self) -> None:
         """Stop the child process (idempotent)."""
-        if self._process is not None:
+        if self._starter is not None:
+            self._starter.join()
+            self._starter = None
+        if self._finalizer is not None:
             self._finalizer()

@@ -24,6 +24,7 @@ from typing import Any, MutableMapping
 
 import numpy as np
 
+from lili_odom.geometry import nonfinite_rows
 from lili_odom.pipeline.types import Scan
 
 __all__ = ["PipelineInputError", "MAX_SWEEP_S", "check_stamp", "checked_scan"]
@@ -97,10 +98,10 @@ def checked_scan(scan: Any, counters: MutableMapping[str, int] | None = None,
         raise PipelineInputError(f"scan dropped must be an integer, got {dropped!r}") from None
     frame_id = str(getattr(scan, "frame_id", "os_lidar"))
 
-    with np.errstate(invalid="ignore", over="ignore"):
-        good = np.isfinite(points).all(axis=1)
-    if not good.all():
-        dropped += int(np.count_nonzero(~good))
+    bad = nonfinite_rows(points)
+    if bad is not None:
+        good = ~bad
+        dropped += int(np.count_nonzero(bad))
         points = points[good]
         times = None if times is None else times[good]
     if times is not None and len(times):
