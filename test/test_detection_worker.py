@@ -98,6 +98,15 @@ def test_a_dead_worker_reports_and_does_not_block(corridor):
     worker.close()
 
 
+def test_a_worker_closed_while_its_process_starts_leaves_no_process():
+    worker = DetectionWorker(partial(ZhangDetector, ZhangConfig()), VOXEL, MAX_RANGE,
+                             PER_VOXEL, timeout_s=5)
+    worker.update_map(np.zeros((10, 3)), np.eye(4))  # queued while the child starts
+    worker.close()
+    assert worker._process is not None and not worker._process.is_alive()
+    worker.close()  # idempotent
+
+
 def test_an_unpicklable_detector_factory_leaves_no_process():
     worker = DetectionWorker(lambda: None, VOXEL, MAX_RANGE, PER_VOXEL)
     assert not worker.alive and "could not start" in worker.failure

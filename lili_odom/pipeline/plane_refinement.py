@@ -248,7 +248,7 @@ def _planes(reference: ReferenceMap, q: np.ndarray, k: int, max_dist: float,
     if not valid.any():
         return valid, normals, centroids, tilt_var
     nb = pts[idx[valid]]  # (m, k, 3)
-    c = nb.mean(axis=1)
+    c = np.einsum("mkj->mj", nb) / k  # the neighbourhoods' means (faster than mean(axis=1))
     w, normal = symmetric_eigen3(_covariances(nb - c[:, None, :]))
     planarity = (w[:, 1] - w[:, 0]) / np.maximum(w[:, 2], 1e-12)
     good = planarity >= min_planarity
