@@ -72,7 +72,9 @@ class NodeConfig:
         base_frame: the robot body frame.
         publish_tf: publish ``odom_frame -> base_frame`` on ``/tf`` when tf2_msgs exists.
         map_publish_period_s: period of the latched ``~/map`` [s].
-        path_max_poses: poses kept in ``~/path``.
+        path_max_poses: poses in each ``~/path`` message (the whole path, evenly thinned);
+            default 5000. The processing thread serialises each message, so a larger cap
+            delays the scans after a publication.
         path_period: period of ``~/path`` [s of stamp time] (0: every scan).
         diagnostics_period: period of the node's diagnostics log line [s of wall time]
             (0: off).
@@ -110,7 +112,7 @@ class NodeConfig:
     base_frame: str = "base_link"
     publish_tf: bool = True
     map_publish_period_s: float = 2.0
-    path_max_poses: int = 20000
+    path_max_poses: int = 5000
     path_period: float = 1.0
     diagnostics_period: float = 10.0
     marker_arrow_length: float = 2.0

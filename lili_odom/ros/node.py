@@ -109,7 +109,7 @@ NODE_PARAMETERS: dict[str, Any] = {
     "base_frame": "base_link",
     "publish_tf": True,
     "map_publish_period_s": 2.0,
-    "path_max_poses": 20000,
+    "path_max_poses": 5000,
     "extrinsics.use_tf_static": True,
     "path_period": 1.0,
     "diagnostics_period": 10.0,
