@@ -102,6 +102,12 @@ class NodeConfig:
             stamp time].
         publish_tf_inverse: publish ``base_frame -> odom_frame`` on ``/tf`` instead (for robots
             whose own EKF owns ``odom -> base_link``).
+        detection_max_wait_s: in the node, the longest a scan waits for a background
+            detection that is due [s]; when it is late the last detection serves the scan and
+            the late one is applied when it has arrived (at the latest
+            ``2 * pipeline.detection_schedule.background_lag`` scans after its own). Default
+            0.02; 0 waits for every due detection, as offline runs always do
+            (``OdometryPipeline``'s ``max_detection_wait_s``).
     """
 
     lidar_topic: str = "/ouster/points"
@@ -128,6 +134,7 @@ class NodeConfig:
     map_save_max_points: int = 5000000
     map_accumulate_period_s: float = 1.0
     publish_tf_inverse: bool = False
+    detection_max_wait_s: float = 0.02
     extrinsics: ExtrinsicsConfig = field(default_factory=ExtrinsicsConfig)
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
 
@@ -137,6 +144,7 @@ class NodeConfig:
         check_range("map_publish_period_s", self.map_publish_period_s, 0.0, 3600.0,
                     lo_open=True, unit="s")
         check_range("path_max_poses", self.path_max_poses, 1, 10**7)
+        check_range("detection_max_wait_s", self.detection_max_wait_s, 0.0, 3600.0, unit="s")
         check_range("path_period", self.path_period, 0.0, 3600.0, unit="s")
         check_range("diagnostics_period", self.diagnostics_period, 0.0, 3600.0, unit="s")
         check_range("marker_arrow_length", self.marker_arrow_length, 0.0, 1000.0, lo_open=True,

@@ -2,6 +2,7 @@
 to the main loop when the process is gone."""
 from __future__ import annotations
 
+import time
 from functools import partial
 
 import numpy as np
@@ -13,7 +14,7 @@ from lili_odom.degeneracy.hessian import ZhangConfig, ZhangDetector
 from lili_odom.degeneracy.lili import LiliConfig, LiliDetector
 from lili_odom.degeneracy.reference import ReferenceMap
 from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionScheduleConfig
-from lili_odom.pipeline.detection_worker import DetectionWorker
+from lili_odom.pipeline.detection_worker import PENDING, DetectionWorker
 from lili_odom.pipeline.odometry import OdometryPipeline, PipelineConfig
 from lili_odom.pipeline.scan_matcher import insert_scan
 from lili_odom.pipeline.types import Scan
@@ -96,6 +97,64 @@ def test_a_dead_worker_reports_and_does_not_block(corridor):
     assert not worker.alive and "died" in worker.failure
     assert worker.submit(2, scan, poses[0], poses[0]) is False
     worker.close()
+
+
+class _SlowDetector:
+    """Zhang's detector after a pause (a detection that comes late)."""
+
+    def __init__(self, seconds: float) -> None:
+        self.seconds = seconds
+
+    def detect(self, reference, scan, initial_pose, optimized_pose=None):
+        time.sleep(self.seconds)
+        return ZhangDetector(ZhangConfig()).detect(reference, scan, initial_pose,
+                                                   optimized_pose=optimized_pose)
+
+
+def test_a_late_result_is_pending_within_the_wait_and_arrives_later(corridor):
+    scans, poses, scan = corridor
+    worker = DetectionWorker(partial(_SlowDetector, 1.0), VOXEL, MAX_RANGE, PER_VOXEL,
+                             timeout_s=30)
+    try:
+        worker.update_map(scans[0], poses[0])
+        assert worker.submit(1, scan, poses[0], poses[0])
+        assert worker.result(1, wait_s=0.05) is PENDING
+        assert worker.alive
+        late = worker.result(1)
+    finally:
+        worker.close()
+    assert late is not None and late is not PENDING and late.ok
+
+
+def test_a_late_background_result_is_applied_when_it_arrives():
+    """As the test above, with a wait limit and every due result late while it may be: the
+    two scans at which it is due and the next carry the old detection over (late), the scan
+    2 x lag after the request waits for it and applies it with its age."""
+    room = closed_room(seed=0)
+    cfg = PipelineConfig(method="hessian")
+    cfg.detection_schedule.max_reuse = 4
+    cfg.detection_schedule.background_lag = 2
+    pipe = OdometryPipeline(cfg, max_detection_wait_s=0.0)
+    waits = []
+    try:
+        outs = [pipe.process_scan(Scan(100.0, room, None))]
+        worker = pipe._worker
+        result = worker.result
+
+        def late(seq, wait_s=None):
+            waits.append(wait_s)
+            return PENDING if wait_s is not None else result(seq)
+
+        worker.result = late
+        outs += [pipe.process_scan(Scan(100.0 + 0.1 * i, room, None)) for i in range(1, 11)]
+    finally:
+        pipe.close()
+    ages = [o.degeneracy.details.get("reused_age", 0) for o in outs[1:]]
+    assert ages == [0, 1, 2, 3, 4, 5, 6, 7, 8, 4], (ages, waits)
+    assert waits == [0.0, 0.0, None]
+    assert pipe.counters["background_detections_late"] == 2
+    with pytest.raises(ValueError, match="max_detection_wait_s"):
+        OdometryPipeline(cfg, max_detection_wait_s=-1.0)
 
 
 def test_a_worker_closed_while_its_process_starts_leaves_no_process():
@@ -204,3 +263,16 @@ def test_a_started_pipeline_has_its_worker_before_the_first_scan_and_the_same_re
     late.start()
     assert late._worker is None
     late.close()
+
+
+def test_the_node_provider_hands_its_wait_limit_to_the_pipeline():
+    from lili_odom.ros.provider import OdometryPipelineProvider
+
+    provider = OdometryPipelineProvider()
+    assert provider.create({"pipeline.method": "none"}).max_detection_wait_s == 0.02
+    assert provider.create({"pipeline.method": "none",
+                            "detection_max_wait_s": 0.05}).max_detection_wait_s == 0.05
+    assert provider.create({"pipeline.method": "none",
+                            "detection_max_wait_s": 0.0}).max_detection_wait_s is None
+    with pytest.raises(ValueError, match="detection_max_wait_s"):
+        provider.create({"pipeline.method": "none", "detection_max_wait_s": -1.0})

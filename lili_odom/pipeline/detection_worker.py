@@ -38,7 +38,10 @@ from lili_odom.degeneracy.result import DegeneracyResult
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DetectionWorker"]
+__all__ = ["DetectionWorker", "PENDING"]
+
+#: What :meth:`DetectionWorker.result` returns when the result did not arrive in time.
+PENDING = object()
 
 
 def _context():
@@ -194,21 +197,35 @@ class DetectionWorker:
                     np.asarray(optimized, dtype=np.float64)))
         return self.alive
 
-    def result(self, seq: int) -> DegeneracyResult | None:
-        """The result of request ``seq`` (waiting for it); earlier, abandoned results are
-        discarded. None when the detection raised (``failure`` says why), or when the child
-        died or did not answer within ``timeout_s`` (the worker is then closed and ``alive``
-        is False)."""
-        if not (self.alive and self._started(wait=True)):
+    def result(self, seq: int, wait_s: float | None = None) -> DegeneracyResult | object | None:
+        """The result of request ``seq``; earlier, abandoned results are discarded.
+
+        Args:
+            seq: the request's sequence number.
+            wait_s: longest wait for it [s]; None waits until it arrives (or ``timeout_s``).
+
+        Returns:
+            The result; :data:`PENDING` when it did not arrive within ``wait_s`` (ask again
+            later); None when the detection raised (``failure`` says why), or when the child
+            died or did not answer within ``timeout_s`` (the worker is then closed and
+            ``alive`` is False).
+        """
+        if not (self.alive and self._started(wait=wait_s is None)):
             return None
-        deadline = time.monotonic() + self.timeout_s
+        now = time.monotonic()
+        deadline = now + self.timeout_s
+        give_up = None if wait_s is None else now + max(0.0, float(wait_s))
         while True:
+            poll = 0.2 if give_up is None else max(0.0, min(0.2, give_up - time.monotonic()))
             try:
-                got, result = self._replies.get(timeout=0.2)
+                got, result = self._replies.get(timeout=poll)
             except queue.Empty:
-                if not self._process.is_alive():
+                starting = self._starter is not None and self._starter.is_alive()
+                if not starting and not self._process.is_alive():
                     self._fail("the detector process died")
                     return None
+                if give_up is not None and time.monotonic() >= give_up:
+                    return PENDING
                 if time.monotonic() > deadline:
                     self._fail(f"no detection result within {self.timeout_s:g} s")
                     return None

@@ -50,7 +50,7 @@ from lili_odom.degeneracy.subspace import orthonormal_rows
 from lili_odom.fusion.estimator import FusionEstimator, SubspaceMeasurement
 from lili_odom.fusion.subspace import scaled_lidar_to_base
 from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionScheduleConfig
-from lili_odom.pipeline.detection_worker import DetectionWorker
+from lili_odom.pipeline.detection_worker import PENDING, DetectionWorker
 from lili_odom.pipeline.plane_refinement import (PlaneFitCache, PlaneRefinementConfig,
                                                  refine_in_subspace)
 from lili_odom.pipeline.remap import constrained_registration
@@ -174,11 +174,27 @@ def basis_in_base(result: DegeneracyResult, T_base_lidar: np.ndarray) -> np.ndar
 
 
 class OdometryPipeline:
-    """Degeneracy-aware LiDAR-inertial-wheel odometry (pure Python; see module docstring)."""
+    """Degeneracy-aware LiDAR-inertial-wheel odometry (pure Python; see module docstring).
 
-    def __init__(self, config: PipelineConfig | None = None):
+    Args:
+        config: the pipeline's parameters (default: ``PipelineConfig()``).
+        max_detection_wait_s: longest the main loop waits for a background detection that is
+            due [s]; when it has not arrived by then, the last detection serves the scan and
+            the result is applied when it has arrived, at the latest ``2 * background_lag``
+            scans after its own (waited for then). None (default) waits for every due
+            result, so the outputs do not depend on timing (offline runs, the benchmarks);
+            the node sets its ``detection_max_wait_s`` parameter, so a slow detection does
+            not hold up the scans behind it.
+    """
+
+    def __init__(self, config: PipelineConfig | None = None,
+                 max_detection_wait_s: float | None = None):
         self.config = config or PipelineConfig()
         self.config.validate()
+        if max_detection_wait_s is not None and not max_detection_wait_s >= 0:
+            raise ValueError(f"max_detection_wait_s must be >= 0 or None, got "
+                             f"{max_detection_wait_s}")
+        self.max_detection_wait_s = max_detection_wait_s
         self.counters: Counter[str] = Counter()
         self._detector = make_detector(self.config)
         self._schedule = DetectionSchedule(self.config.detection_schedule)
@@ -551,12 +567,20 @@ class OdometryPipeline:
 
     def _collect_background(self, seq: int) -> None:
         """Apply the background detection in flight when it is due at scan ``seq``
-        (``background_lag`` scans after its own), waiting for it if needed."""
+        (``background_lag`` scans after its own), waiting for it if needed (at most
+        ``max_detection_wait_s`` until ``2 * background_lag`` scans after its own)."""
         lag = self.config.detection_schedule.background_lag
         if self._pending is None or self._worker is None or seq - self._pending < lag:
             return
+        wait = self.max_detection_wait_s
+        if wait is not None and seq - self._pending < 2 * lag:
+            result = self._worker.result(self._pending, wait_s=wait)
+            if result is PENDING:  # the last detection serves this scan too
+                self.counters["background_detections_late"] += 1
+                return
+        else:
+            result = self._worker.result(self._pending)
         pending, self._pending = self._pending, None
-        result = self._worker.result(pending)
         if result is None:
             self.counters["background_detection_failures"] += 1
             self._warn.warning("background", "background detection lost (%s)",

@@ -126,6 +126,7 @@ NODE_PARAMETERS: dict[str, Any] = {
     "map_save_max_points": 5000000,
     "map_accumulate_period_s": 1.0,
     "publish_tf_inverse": False,
+    "detection_max_wait_s": 0.02,
 }
 
 

@@ -65,4 +65,6 @@ class OdometryPipelineProvider:
     def create(self, parameters: Mapping[str, Any]) -> PipelineLike:
         from lili_odom.pipeline.odometry import OdometryPipeline
 
-        return OdometryPipeline(self.node_config(parameters).pipeline)
+        config = self.node_config(parameters)
+        wait = config.detection_max_wait_s
+        return OdometryPipeline(config.pipeline, max_detection_wait_s=wait if wait > 0 else None)
