@@ -105,9 +105,9 @@ class NodeConfig:
         detection_max_wait_s: in the node, the longest a scan waits for a background
             detection that is due [s]; when it is late the last detection serves the scan and
             the late one is applied when it has arrived (at the latest
-            ``2 * pipeline.detection_schedule.background_lag`` scans after its own). Default
-            0.02; 0 waits for every due detection, as offline runs always do
-            (``OdometryPipeline``'s ``max_detection_wait_s``).
+            ``2 * pipeline.detection_schedule.background_lag`` scans after its own), unless
+            the one before was late too. Default 0.02; 0 waits for every due detection, as
+            offline runs always do (``OdometryPipeline``'s ``max_detection_wait_s``).
     """
 
     lidar_topic: str = "/ouster/points"

@@ -127,9 +127,10 @@ def test_a_late_result_is_pending_within_the_wait_and_arrives_later(corridor):
 
 
 def test_a_late_background_result_is_applied_when_it_arrives():
-    """As the test above, with a wait limit and every due result late while it may be: the
-    two scans at which it is due and the next carry the old detection over (late), the scan
-    2 x lag after the request waits for it and applies it with its age."""
+    """As the test above, with a wait limit and every result late: the scan at which the
+    first is due and the next carry the old detection over, the scan 2 x lag after the
+    request waits for it and applies it with its age. The next one, late like the one
+    before, is waited for at the scan it is due."""
     room = closed_room(seed=0)
     cfg = PipelineConfig(method="hessian")
     cfg.detection_schedule.max_reuse = 4
@@ -146,12 +147,12 @@ def test_a_late_background_result_is_applied_when_it_arrives():
             return PENDING if wait_s is not None else result(seq)
 
         worker.result = late
-        outs += [pipe.process_scan(Scan(100.0 + 0.1 * i, room, None)) for i in range(1, 11)]
+        outs += [pipe.process_scan(Scan(100.0 + 0.1 * i, room, None)) for i in range(1, 14)]
     finally:
         pipe.close()
     ages = [o.degeneracy.details.get("reused_age", 0) for o in outs[1:]]
-    assert ages == [0, 1, 2, 3, 4, 5, 6, 7, 8, 4], (ages, waits)
-    assert waits == [0.0, 0.0, None]
+    assert ages == [0, 1, 2, 3, 4, 5, 6, 7, 8, 4, 5, 6, 2], (ages, waits)
+    assert waits == [0.0, 0.0, 0.0, None, 0.0, None]
     assert pipe.counters["background_detections_late"] == 2
     with pytest.raises(ValueError, match="max_detection_wait_s"):
         OdometryPipeline(cfg, max_detection_wait_s=-1.0)

@@ -181,10 +181,12 @@ class OdometryPipeline:
         max_detection_wait_s: longest the main loop waits for a background detection that is
             due [s]; when it has not arrived by then, the last detection serves the scan and
             the result is applied when it has arrived, at the latest ``2 * background_lag``
-            scans after its own (waited for then). None (default) waits for every due
-            result, so the outputs do not depend on timing (offline runs, the benchmarks);
-            the node sets its ``detection_max_wait_s`` parameter, so a slow detection does
-            not hold up the scans behind it.
+            scans after its own (waited for then). When the result before was late too, a
+            late result is waited for at once (the detector lacks CPU, and the wait gives
+            it). None (default) waits for every due result, so the outputs do not depend on
+            timing (offline runs, the benchmarks); the node sets its
+            ``detection_max_wait_s`` parameter, so an occasional slow detection does not hold
+            up the scans behind it.
     """
 
     def __init__(self, config: PipelineConfig | None = None,
@@ -201,6 +203,8 @@ class OdometryPipeline:
         self._background = self.config.detection_schedule.background
         self._worker: DetectionWorker | None = None  # start() or the first map update
         self._pending: int | None = None  # detection request in flight (its sequence number)
+        self._late_before = False  # the last background result was late when due
+        self._pending_late = False  # the one in flight was
         self._detection_seq = 0
         self._matcher = ScanMatcher(self.config.scan_matcher)
         self._new_estimator()
@@ -567,19 +571,30 @@ class OdometryPipeline:
 
     def _collect_background(self, seq: int) -> None:
         """Apply the background detection in flight when it is due at scan ``seq``
-        (``background_lag`` scans after its own), waiting for it if needed (at most
-        ``max_detection_wait_s`` until ``2 * background_lag`` scans after its own)."""
+        (``background_lag`` scans after its own), waiting for it if needed (see
+        ``max_detection_wait_s``)."""
         lag = self.config.detection_schedule.background_lag
         if self._pending is None or self._worker is None or seq - self._pending < lag:
             return
         wait = self.max_detection_wait_s
-        if wait is not None and seq - self._pending < 2 * lag:
-            result = self._worker.result(self._pending, wait_s=wait)
-            if result is PENDING:  # the last detection serves this scan too
-                self.counters["background_detections_late"] += 1
-                return
-        else:
+        if wait is None:
             result = self._worker.result(self._pending)
+        else:
+            # A late result gets up to 2 x lag scans, unless the one before was late too: the
+            # detector then falls behind for want of CPU, and waiting gives it the time.
+            due = seq - self._pending == lag
+            grace = not self._late_before and seq - self._pending < 2 * lag
+            result = self._worker.result(self._pending, wait_s=wait if grace else 0.0)
+            if result is PENDING:
+                if due:
+                    self.counters["background_detections_late"] += 1
+                    self._pending_late = True
+                if grace:  # the last detection serves this scan too
+                    return
+                result = self._worker.result(self._pending)
+            elif due:
+                self._pending_late = False
+            self._late_before = self._pending_late
         pending, self._pending = self._pending, None
         if result is None:
             self.counters["background_detection_failures"] += 1
