@@ -491,8 +491,8 @@ class OdometryPipeline:
 
     def start(self) -> None:
         """Start the background detector process now rather than at the first map update
-        (its start-up, most of a second, runs in a thread while the first scans are
-        processed, and is the sooner over). Nothing when
+        (its start-up, most of a second, runs in a thread and is then over before the first
+        scans, or overlaps them). Nothing when
         detection is not in the background, the process runs already, or the local map
         already holds scans (a process started now would mirror a map without them)."""
         if self._matcher.map_empty:
