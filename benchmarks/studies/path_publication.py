@@ -6,9 +6,10 @@
 The node keeps one ``geometry_msgs/PoseStamped`` per processed scan and publishes the path,
 evenly thinned to ``path_max_poses`` poses, every ``path_period`` s from the thread that
 processes the scans (:meth:`lili_odom.ros.node.LiliOdomNode._publish`). For each path length
-this builds that many pose messages with the rclpy message factory
-(:class:`lili_odom.ros.factory.RclpyFactory`), then times what a publication does in Python
-and rclpy: thinning (:func:`lili_odom.bagio.writer.thin_poses`), the ``nav_msgs/Path``
+``n`` this builds ``2 n`` pose messages with the rclpy message factory
+(:class:`lili_odom.ros.factory.RclpyFactory`; the node keeps up to ``4 n`` before it thins
+what it keeps), then times what a publication of ``n`` poses does in Python and rclpy:
+thinning to ``n`` (:func:`lili_odom.bagio.writer.thin_poses`), the ``nav_msgs/Path``
 (:func:`lili_odom.messages.path_of`) and its serialisation (``rclpy.serialization``, the
 conversion to the C message every ``publish`` makes). Median of ``--repeats`` [ms]; the DDS
 write itself is not included. Needs the ROS 2 Python packages (``make install-ros``).
@@ -28,7 +29,8 @@ DEFAULT_POSES = (1000, 2000, 5000, 10000, 20000)
 
 
 def publication_ms(n: int, repeats: int) -> dict[str, float]:
-    """Median times [ms] of thinning, building and serialising a path of ``n`` poses."""
+    """Median times [ms] of thinning ``2 n`` poses to ``n``, building the path and
+    serialising it."""
     from lili_odom import geometry
     from lili_odom.bagio.writer import thin_poses
     from lili_odom.messages import path_of, pose_stamped_msg
@@ -37,11 +39,11 @@ def publication_ms(n: int, repeats: int) -> dict[str, float]:
     f = RclpyFactory()
     poses = [pose_stamped_msg(f, 100.0 + 0.1 * i,
                               geometry.exp(np.array([0.1 * i, 0.0, 0.0, 0.0, 0.0, 0.001 * i])),
-                              "lili_odom") for i in range(n)]
+                              "lili_odom") for i in range(2 * n)]
     build, serialise = [], []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        msg = path_of(f, thin_poses(poses, n), "lili_odom", 100.0 + 0.1 * n)
+        msg = path_of(f, thin_poses(poses, n), "lili_odom", 100.0 + 0.2 * n)
         t1 = time.perf_counter()
         data = f.serialize(msg)
         t2 = time.perf_counter()
@@ -56,9 +58,9 @@ def publication_ms(n: int, repeats: int) -> dict[str, float]:
 def markdown(report: dict) -> str:
     m = report["machine"]
     lines = ["# One `~/path` publication by path length", "",
-             "`python -m benchmarks.studies.path_publication` (module docstring): the "
-             "thinning, the `nav_msgs/Path` and its serialisation by rclpy, median of "
-             f"{report['repeats']} repeats, on the node's processing thread. Machine: "
+             "`python -m benchmarks.studies.path_publication` (module docstring): "
+             "thinning twice as many poses, the `nav_msgs/Path` and its serialisation by "
+             f"rclpy, median of {report['repeats']} repeats, on the node's processing thread. Machine: "
              f"{m['cpu']}, {m['cores']} cores, Python {m['python']}; commit `{m['commit']}`.",
              "",
              "| poses | build [ms] | serialise [ms] | total [ms] | message [kB] |",
