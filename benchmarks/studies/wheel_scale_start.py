@@ -2,6 +2,8 @@
 
     python -m benchmarks.studies.wheel_scale_start                  # parking_lot, 0-40 s, 32x512
     python -m benchmarks.studies.wheel_scale_start --scenario building --duration 30
+    python -m benchmarks.studies.wheel_scale_start --set fusion.wheel_scale.max_lidar_sigma=0.05 \
+        --name wheel_scale_start_sigma5
 
 Runs ``lili`` (the defaults) over a window of a suite scenario (simulated with the suite's
 scenario code, :mod:`benchmarks._pieces`) and records for every scan, against the distance the
@@ -10,8 +12,8 @@ direction, whether the wheel-scale estimator was chaining increments into a segm
 (:attr:`lili_odom.fusion.wheel_scale.WheelScaleEstimator.chaining`), the segments used and
 rejected so far, and the scale applied. Reports the distance of the first chained scan, of
 the first used segment (the scale applies from then on), the scale every 5 m and its error
-against the scenario's true wheel scale (``1 + wheel_scale_error``). Writes
-``benchmarks/results/wheel_scale_start.{md,json}``.
+against the scenario's true wheel scale (``1 + wheel_scale_error``). ``--set`` runs other
+parameters. Writes ``benchmarks/results/<name>.{md,json}`` (default ``wheel_scale_start``).
 """
 from __future__ import annotations
 
@@ -19,17 +21,18 @@ import argparse
 
 import numpy as np
 
-from benchmarks._common import RESULTS, config_with, machine_info, write_results
+from benchmarks._common import (RESULTS, SET_HELP, config_with, machine_info, parse_set,
+                                write_results)
 from benchmarks._pieces import (add_window_arguments, format_resolution, window_bag,
                                 window_command)
 
 
-def trace(bag) -> dict:
+def trace(bag, overrides: dict | None = None) -> dict:
     """Per scan: stamp, degenerate (bool), chaining, used, rejected, scale; and the truth."""
     from lili_odom.bagio.reader import BagReader
     from lili_odom.evaluation.replay import Replay
 
-    config = config_with({"method": "lili"}, prog="wheel_scale_start")
+    config = config_with({"method": "lili", **(overrides or {})}, prog="wheel_scale_start")
     rows: list[tuple] = []
 
     def record(out, pipeline) -> None:
@@ -84,13 +87,15 @@ def summarise(result: dict, true_scale: float | None, step_m: float = 5.0) -> di
 
 def markdown(report: dict, command: str) -> str:
     p, s = report["piece"], report["summary"]
+    settings = ", ".join(f"`{k}` = {v}" for k, v in report.get("overrides", {}).items()) \
+        or "defaults"
 
     def m(v):
         return "never" if v is None else f"{v:.1f} m"
 
     lines = [
         "# The wheel scale after a start", "",
-        f"`{command}`: `lili` (defaults) over `{p['scenario']}` (seed {p['seed']}) from "
+        f"`{command}`: `lili` ({settings}) over `{p['scenario']}` (seed {p['seed']}) from "
         f"{p['start_s']:g} s for {p['duration_s']:g} s at {p['resolution']} "
         "(`benchmarks/studies/wheel_scale_start.py`). Distances are the true path since the "
         "window's start.", "",
@@ -115,7 +120,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_window_arguments(ap, "parking_lot", 40.0)
     ap.add_argument("--out", default=RESULTS)
+    ap.add_argument("--name", default="wheel_scale_start",
+                    help="file name of the results without .md/.json")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=SET_HELP)
     args = ap.parse_args(argv)
+    overrides = parse_set(args.set, "wheel_scale_start")
     scenario, res, bag = window_bag(ap, args)
     error = scenario.errors.wheel_scale_error
     true_scale = None if error is None else 1.0 + float(error)
@@ -123,9 +132,12 @@ def main(argv=None) -> int:
                         "duration_s": args.duration, "seed": args.seed,
                         "resolution": format_resolution(res)},
               "machine": machine_info(),
-              "summary": summarise(trace(bag), true_scale)}
-    command = window_command("benchmarks.studies.wheel_scale_start", args, "parking_lot", 40.0)
-    print(f"wrote {write_results(args.out, 'wheel_scale_start', markdown(report, command), report)}")
+              "overrides": overrides,
+              "summary": summarise(trace(bag, overrides), true_scale)}
+    command = (window_command("benchmarks.studies.wheel_scale_start", args, "parking_lot", 40.0)
+               + "".join(f" --set {k}={v}" for k, v in overrides.items())
+               + (f" --name {args.name}" if args.name != "wheel_scale_start" else ""))
+    print(f"wrote {write_results(args.out, args.name, markdown(report, command), report)}")
     return 0
 
 
