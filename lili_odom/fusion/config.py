@@ -152,7 +152,9 @@ class FusionConfig:
         use_imu: False ignores the IMU entirely (fallback motion model every step).
         prior_sigma_translation: initial pose prior [m].
         prior_sigma_rotation: initial pose prior [rad].
-        prior_sigma_velocity: initial velocity prior [m/s] when the robot was seen at rest.
+        prior_sigma_velocity: initial velocity prior [m/s] when the robot was seen at rest
+            (wheels at rest and a steady IMU; an IMU alone cannot tell rest from driving at
+            constant speed).
         prior_sigma_velocity_moving: initial velocity prior [m/s] otherwise.
         prior_sigma_velocity_wheel: initial velocity prior [m/s] when the robot started while
             moving and the wheel odometry gave its velocity.

@@ -311,7 +311,7 @@ class FusionEstimator:
                 roll/pitch aligned to gravity from the preceding IMU samples when enabled.
             velocity: (3,) initial velocity in the odometry frame [m/s]. None: from the wheel
                 odometry just before ``t`` when the robot is moving, else zero (tight prior if
-                the IMU showed the robot at rest, loose otherwise).
+                the wheels report rest and the IMU agrees, loose otherwise).
 
         Raises:
             ValueError: non-finite ``t``, invalid ``pose`` or ``velocity``.
@@ -326,7 +326,8 @@ class FusionEstimator:
         samples = self.imu.samples(t - cfg.gravity_window_s, t) if cfg.use_imu else []
         # a steady IMU also fits constant-speed driving: the wheels, when there, decide
         wheel_v = self._wheel_velocity(t) if velocity is None else None
-        if wheel_v is not None and np.linalg.norm(wheel_v) < 0.01:
+        wheels_at_rest = wheel_v is not None and np.linalg.norm(wheel_v) < 0.01
+        if wheels_at_rest:
             wheel_v = None  # at rest: the IMU's stationary test and tight prior apply
         if samples:
             align = gravity_alignment(samples, self.T_base_imu[:3, :3])
@@ -348,8 +349,11 @@ class FusionEstimator:
             sigma_v = cfg.prior_sigma_velocity_wheel
             notes.append("initial velocity from wheel odometry")
         elif velocity is None:
+            # a steady IMU alone cannot tell rest from driving at constant speed (a bag that
+            # starts mid-drive): only wheels that report rest make the zero velocity certain
             v0 = np.zeros(3)
-            sigma_v = cfg.prior_sigma_velocity if stationary else cfg.prior_sigma_velocity_moving
+            at_rest = stationary and wheels_at_rest
+            sigma_v = cfg.prior_sigma_velocity if at_rest else cfg.prior_sigma_velocity_moving
         else:
             v0 = np.asarray(velocity, dtype=float).reshape(3)
             if not finite(v0):

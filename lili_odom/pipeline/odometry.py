@@ -55,6 +55,7 @@ from lili_odom.pipeline.plane_refinement import (PlaneFitCache, PlaneRefinementC
                                                  refine_in_subspace)
 from lili_odom.pipeline.remap import constrained_registration
 from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig
+from lili_odom.pipeline.start_sweeps import StartSweep, StartSweeps
 from lili_odom.pipeline.types import ImuSample, OdometryOutput, Scan, WheelSample
 from lili_odom.pipeline.validation import checked_scan
 
@@ -83,6 +84,10 @@ class PipelineConfig:
             oldest is processed with what there is.
         detection_schedule: when a recent detection is carried over instead of running the
             detector again (:mod:`lili_odom.pipeline.detection_schedule`).
+        redeskew_start: once the first two sweeps of a new local map are in it, deskew again
+            those whose motion by the fused twist differs from the one they were deskewed
+            with, and rebuild the map from them (a start while moving:
+            :mod:`lili_odom.pipeline.start_sweeps`). Default True.
         remap_iterations: on a degenerate scan, the registration is re-run held at the wheel
             prediction along the degenerate subspace (solution remapping,
             :mod:`lili_odom.pipeline.remap`) for at most this many single ICP iterations, and
@@ -106,6 +111,7 @@ class PipelineConfig:
     detection_points: int = 4000
     sensor_wait_s: float = 0.3
     max_pending_scans: int = 3
+    redeskew_start: bool = True
     remap_iterations: int = 10
     detection_schedule: DetectionScheduleConfig = field(default_factory=DetectionScheduleConfig)
     plane_refinement: PlaneRefinementConfig = field(default_factory=PlaneRefinementConfig)
@@ -207,6 +213,7 @@ class OdometryPipeline:
         self._pending_late = False  # the one in flight was
         self._detection_seq = 0
         self._matcher = ScanMatcher(self.config.scan_matcher)
+        self._start_sweeps = StartSweeps()
         self._new_estimator()
         self._last_stamp: float | None = None
         self._last_output: OdometryOutput | None = None
@@ -252,6 +259,7 @@ class OdometryPipeline:
         """
         old = self.estimator
         self._matcher.reset()
+        self._start_sweeps.reset()
         self._forget_detections(new_map=True)
         self._new_estimator()
         if keep_from is not None and self._last_stamp is not None:
@@ -455,11 +463,19 @@ class OdometryPipeline:
 
         t0 = time.perf_counter()
         fused_lidar = fused.pose @ T_bl
+        map_was_empty = self._matcher.map_empty
         inserted = self._matcher.update_map(map_points, fused_lidar,
                                             np.linalg.inv(guess) @ fused_lidar)
         self._start_worker()
         if self._worker is not None and self._worker.alive:
             self._worker.update_map(map_points, inserted)
+        if self.config.redeskew_start and self.config.scan_matcher.deskew:
+            twist = geometry.adjoint(np.linalg.inv(T_bl)) @ self._body_twist(fused)
+            redo = self._start_sweeps.add(StartSweep(points, times, sweep_motion, inserted,
+                                                     t_first, t_ref), map_was_empty, twist)
+            if redo is not None:
+                self._rebuild_map(redo)
+                warnings.append("local map rebuilt from its first sweeps deskewed again")
         if self.config.plane_refinement.enabled:  # the next scan's plane fits need the tree
             self._matcher.reference.build_kdtree_ahead()
         timings["map"] = time.perf_counter() - t0
@@ -519,6 +535,20 @@ class OdometryPipeline:
     def _map_parameters(self) -> tuple[float, float, int]:
         c = self.config.scan_matcher
         return c.voxel, c.max_range, c.max_points_per_voxel
+
+    def _rebuild_map(self, sweeps: list[StartSweep]) -> None:
+        """Replace the local map (and the background detector's mirror) by ``sweeps``
+        deskewed with their ``motion``, inserted at their poses."""
+        self.counters["start_map_rebuilt"] += 1
+        log.info("started while moving: the first %d sweeps of the local map deskewed again "
+                 "with the fused motion", len(sweeps))
+        self._matcher.clear_map()
+        self._forget_detections(new_map=True)
+        for s in sweeps:
+            map_points, _ = self._matcher.preprocess(s.points, s.times, s.motion)
+            inserted = self._matcher.insert(map_points, s.pose)
+            if self._worker is not None and self._worker.alive:
+                self._worker.update_map(map_points, inserted)
 
     def _forget_detections(self, new_map: bool = False) -> None:
         """Drop the last detection and the one in flight (re-initialisation, failed

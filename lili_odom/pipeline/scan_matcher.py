@@ -94,10 +94,14 @@ class ScanMatcher:
 
     def reset(self) -> None:
         """Forget the map and the threshold model (e.g. after a clock jump backwards)."""
+        self.clear_map()
+        self._threshold = AdaptiveThreshold(self._kiss_config)
+
+    def clear_map(self) -> None:
+        """Forget the map only (the threshold model stays)."""
         c = self.config
         self.voxel_map = VoxelHashMap(c.voxel, c.max_range, c.max_points_per_voxel)
         self.reference = ReferenceMap(self.voxel_map, c.voxel, c.max_points_per_voxel)
-        self._threshold = AdaptiveThreshold(self._kiss_config)
 
     @property
     def map_empty(self) -> bool:
@@ -179,9 +183,14 @@ class ScanMatcher:
 
         ``model_deviation`` is ``guess^-1 @ pose`` (how far the prediction was off).
         """
-        pose = orthonormalize(pose)
         if is_valid_pose(model_deviation, 1e-3):
             self._threshold.update_model_deviation(orthonormalize(model_deviation))
+        return self.insert(map_points, pose)
+
+    def insert(self, map_points: np.ndarray, pose: np.ndarray) -> np.ndarray:
+        """Insert ``map_points`` (LiDAR frame) at ``pose`` (``T_odom_lidar``) without touching
+        the threshold model; returns the pose inserted at (re-orthonormalised)."""
+        pose = orthonormalize(pose)
         insert_scan(self.reference, map_points, pose)
         return pose
 
