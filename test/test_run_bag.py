@@ -60,3 +60,17 @@ def test_scans_csv_and_tilt_diagnostics_show_the_bias_taken_for_a_tilt(tmp_path)
     np.testing.assert_allclose(d["fused"][0, :2], expected, atol=0.1)
     lines = tilt_table(out, 1.0, 3, 0)
     assert sum(line.startswith("| ") for line in lines) >= 3
+
+
+@pytest.mark.skipif(not BAG.is_dir(), reason="CI bag missing")
+def test_a_wheel_topic_missing_from_the_bag_is_named_with_the_candidates(tmp_path, caplog):
+    cfg = tmp_path / "wheels.yaml"
+    cfg.write_text("lili_odom:\n  ros__parameters:\n    wheel_topic: /wheels\n")
+    rc = main(["run", str(BAG), "--method", "none", "--out", str(tmp_path / "o"),
+               "--config", str(cfg), "--max-scans", "3", "--no-progress"])
+    assert rc == 0
+    notes = [r.getMessage() for r in caplog.records if "/wheels" in r.getMessage()]
+    assert len(notes) == 1, caplog.text
+    assert "IMU alone" in notes[0] and "/platform/odom (set wheel_topic)" in notes[0]
+    assert "/ground_truth/odom" not in notes[0]
+    assert not any("/ouster/imu" in r.getMessage() for r in caplog.records)

@@ -136,6 +136,8 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
     with source as reader, \
             OutputBagWriter(out_dir / "odometry", odom_frame=config.odom_frame,
                             base_frame=config.base_frame) as writer:
+        for note in missing_inputs(reader, config):
+            log.warning(note)
         bar = _Progress(reader.message_count, not progress, progress_label)
 
         def record(out, _pipeline) -> None:
@@ -232,6 +234,29 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
                         {run.method: run.poses[:, :3, 3]}, {run.method: dims > 0},
                         title=f"{Path(bag).name}: {run.method}")
     return run
+
+
+def missing_inputs(reader: Any, config: NodeConfig) -> list[str]:
+    """One line per IMU or wheel topic of ``config`` that ``reader`` (a bag) does not have,
+    naming the bag's topics of that message type (none for readers without a topic list)."""
+    types = getattr(reader, "topic_types", None)
+    if not isinstance(types, dict):
+        return []
+    effect = {"imu_topic": ("sensor_msgs/msg/Imu", "the prediction falls back to the motion "
+                            "model"),
+              "wheel_topic": ("nav_msgs/msg/Odometry", "degenerate directions rest on the "
+                              "IMU alone")}
+    notes = []
+    for name, (msgtype, consequence) in effect.items():
+        topic = getattr(config, name)
+        if topic in types:
+            continue
+        others = sorted(t for t, m in types.items()
+                        if m == msgtype and t != config.ground_truth_topic)
+        hint = (f"; {msgtype} topics in the bag: {', '.join(others)} (set {name})" if others
+                else "")
+        notes.append(f"{topic} ({name}) is not in the bag: {consequence}{hint}")
+    return notes
 
 
 def summary_line(summary: dict) -> str:
