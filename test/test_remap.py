@@ -97,3 +97,28 @@ def test_constrained_registration_keeps_the_prediction_along_the_axis() -> None:
     # a failing ICP step is reported, with the last good pose
     failed = constrained_registration(lambda pose: None, registered, prediction, axis, L)
     assert not failed.ok and np.all(np.isfinite(failed.pose))
+
+
+def test_the_pipeline_remaps_to_the_wheels_only_and_keeps_the_registration_without_them():
+    """Held at the IMU's prediction, the measurement would only confirm the fused velocity
+    that made the prediction: without wheel data the registration itself is the measurement."""
+    from lili_odom.degeneracy.result import DegeneracyResult
+    from lili_odom.pipeline.odometry import OdometryPipeline, PipelineConfig
+
+    rng = np.random.default_rng(2)
+    cfg = PipelineConfig()
+    cfg.detection_schedule.background = False
+    p = OdometryPipeline(cfg)
+    p._matcher.insert(_corridor(rng), np.eye(4))
+    p.estimator.initialize(10.0, pose=np.linalg.inv(p.T_base_lidar))  # LiDAR at the origin
+    source = _corridor(rng)
+    source = source[np.linalg.norm(source, axis=1) < 15.0]
+    registered = g.exp(np.array([0.4, 0.0, 0.0, 0.0, 0.0, 0.0]))  # slid 0.4 m along x
+    axis = DegeneracyResult("lili", registered, _scaled_rows([[1, 0, 0, 0, 0, 0]]), L)
+    out = p._remap(source, registered, 10.1, axis)
+    assert out is registered and p.counters["remap_without_wheels"] == 1
+    for t in (9.9, 10.0, 10.1):  # the wheels report standing still
+        p.estimator.add_wheel(t, np.eye(4))
+    out = p._remap(source, registered, 10.1, axis)
+    assert abs(g.log(out)[0]) < 0.02  # held at the wheels' prediction: the origin
+    assert p.counters["remap_without_wheels"] == 1

@@ -142,3 +142,21 @@ def test_a_start_while_moving_is_not_left_half_a_sweep_behind():
     before, rebuilt = _drive(redeskew=False)
     assert rebuilt == 0
     assert before[2:].max() > 0.1, before
+
+
+def test_a_speed_within_its_uncertainty_counts_as_none():
+    """Without wheels, a robot at rest in a degenerate place has a fused speed after two
+    sweeps that a sliding registration made: not significant, so not deskewed with."""
+    s = StartSweeps(significance=3.0)
+    s.add(_sweep(0, 0.0, 0.0), True, _twist())
+    assert s.due
+    assert s.add(_sweep(1, 0.0, 0.0), False, _twist(0.5), speed_sigma=0.4) is None
+    assert not s.due
+    s.add(_sweep(0, 0.0, 0.0), True, _twist())
+    assert s.add(_sweep(1, 0.0, 0.0), False, _twist(0.5), speed_sigma=None) is None
+    s.add(_sweep(0, 0.0, 0.0), True, _twist())
+    redo = s.add(_sweep(1, 0.0, 0.0), False, _twist(0.5, yaw_rate=0.5), speed_sigma=0.4)
+    assert redo is not None  # the turn (from the gyro) still counts, the speed does not
+    np.testing.assert_allclose(geometry.log(redo[0].motion), [0, 0, 0, 0, 0, 0.05], atol=1e-9)
+    s.add(_sweep(0, 2.5, 0.0), True, _twist())
+    assert s.add(_sweep(1, 2.5, 0.0), False, _twist(2.5), speed_sigma=0.4) is not None

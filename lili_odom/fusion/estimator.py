@@ -911,6 +911,20 @@ class FusionEstimator:
         out = self.predict_poses([t])
         return None if out is None else out[0]
 
+    def velocity_sigma(self) -> float | None:
+        """Largest standard deviation [m/s] of the newest state's velocity (odometry frame,
+        iSAM2's marginal); None before the first state or when it cannot be computed."""
+        s = self._state
+        if s is None or self._isam is None:
+            return None
+        try:
+            cov = np.asarray(self._isam.marginalCovariance(V(s.index)), dtype=float)
+        except RuntimeError:
+            return None
+        if cov.shape != (3, 3) or not finite(cov):
+            return None
+        return math.sqrt(max(float(np.linalg.eigvalsh(0.5 * (cov + cov.T)).max()), 0.0))
+
     def wheel_prediction(self, t: float) -> np.ndarray | None:
         """Pose of base_link (4x4, odometry frame) at ``t`` [s]: the newest fused pose moved by
         the (scale-corrected) wheel increment since it; None without wheel data or state.

@@ -14,9 +14,9 @@ measured offline is what runs on the robot. Per scan (``process_scan``):
    and is applied a couple of scans later (:mod:`lili_odom.pipeline.detection_schedule`,
    :mod:`lili_odom.pipeline.detection_worker`; ``start()`` starts and ``close()`` stops
    that process);
-5. on a degenerate scan the registration is held at the wheels' prediction along the subspace
-   (solution remapping, :mod:`lili_odom.pipeline.remap`); directions outside the subspace
-   that point-to-plane barely holds join it, and the registration is checked by
+5. on a degenerate scan with wheel data the registration is held at the wheels' prediction
+   along the subspace (solution remapping, :mod:`lili_odom.pipeline.remap`); directions
+   outside the subspace that point-to-plane barely holds join it, and the registration is checked by
    point-to-plane along the direction of travel left outside it (point-to-point ICP against a
    young or sparse map lags along it); the registration is then refined inside the subspace
    by point-to-plane Gauss-Newton, which measures what the LiDAR still knows there
@@ -88,8 +88,8 @@ class PipelineConfig:
             those whose motion by the fused twist differs from the one they were deskewed
             with, and rebuild the map from them (a start while moving:
             :mod:`lili_odom.pipeline.start_sweeps`). Default True.
-        remap_iterations: on a degenerate scan, the registration is re-run held at the wheel
-            prediction along the degenerate subspace (solution remapping,
+        remap_iterations: on a degenerate scan with wheel data, the registration is re-run
+            held at the wheel prediction along the degenerate subspace (solution remapping,
             :mod:`lili_odom.pipeline.remap`) for at most this many single ICP iterations, and
             that pose is what the LiDAR factor measures; 0 = the unconstrained
             registration. Needed by an absolute LiDAR factor (``fusion.lidar.factor``
@@ -403,7 +403,7 @@ class OdometryPipeline:
         t0 = time.perf_counter()
         measured = reg.pose
         if self._remaps(degeneracy):
-            measured = self._remap(source, reg.pose, guess, t_ref, degeneracy)
+            measured = self._remap(source, reg.pose, t_ref, degeneracy)
         timings["remap"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
@@ -413,14 +413,14 @@ class OdometryPipeline:
             if weak is not None:
                 degeneracy = weak
                 if self._remaps(degeneracy):
-                    measured = self._remap(source, reg.pose, guess, t_ref, degeneracy)
+                    measured = self._remap(source, reg.pose, t_ref, degeneracy)
             along = self._along_track(planes, measured, guess, degeneracy)
             if along is not None and along.ok:
                 measured = along.pose
             elif along is not None:
                 degeneracy = along.degeneracy
                 if self._remaps(degeneracy):
-                    measured = self._remap(source, reg.pose, guess, t_ref, degeneracy)
+                    measured = self._remap(source, reg.pose, t_ref, degeneracy)
             if reg.ok:
                 measured = self._refine_constrained(planes, measured, degeneracy)
         timings["along_track"] = time.perf_counter() - t0
@@ -471,8 +471,9 @@ class OdometryPipeline:
             self._worker.update_map(map_points, inserted)
         if self.config.redeskew_start and self.config.scan_matcher.deskew:
             twist = geometry.adjoint(np.linalg.inv(T_bl)) @ self._body_twist(fused)
-            redo = self._start_sweeps.add(StartSweep(points, times, sweep_motion, inserted,
-                                                     t_first, t_ref), map_was_empty, twist)
+            redo = self._start_sweeps.add(
+                StartSweep(points, times, sweep_motion, inserted, t_first, t_ref),
+                map_was_empty, twist, est.velocity_sigma() if self._start_sweeps.due else 0.0)
             if redo is not None:
                 self._rebuild_map(redo)
                 warnings.append("local map rebuilt from its first sweeps deskewed again")
@@ -641,16 +642,22 @@ class OdometryPipeline:
         return bool(self.config.remap_iterations and degeneracy is not None and degeneracy.ok
                     and degeneracy.degenerate)
 
-    def _remap(self, source: np.ndarray, registered: np.ndarray, guess: np.ndarray,
-               t_ref: float, degeneracy: DegeneracyResult) -> np.ndarray:
+    def _remap(self, source: np.ndarray, registered: np.ndarray, t_ref: float,
+               degeneracy: DegeneracyResult) -> np.ndarray:
         """The registration held at the wheels' prediction along the degenerate subspace
-        (solution remapping), ``T_odom_lidar``.
+        (solution remapping), ``T_odom_lidar``; the registration itself without wheel data.
 
-        The wheels' prediction where there is one: the IMU prediction carries the fused
-        velocity, which a measurement held at it would only confirm.
+        Only the wheels' prediction: the IMU's prediction carries the fused velocity, which a
+        measurement held at it only confirms; the refinement inside the subspace then starts
+        there too and finds no planes within its residual gate once the IMU has drifted
+        farther, so the IMU would drift on unchecked (a tunnel with a few features during a
+        wheel outage).
         """
         wheel = self.estimator.wheel_prediction(t_ref)
-        reference = guess if wheel is None else wheel @ self.T_base_lidar
+        if wheel is None:
+            self.counters["remap_without_wheels"] += 1
+            return registered
+        reference = wheel @ self.T_base_lidar
         remapped = constrained_registration(
             lambda pose: self._matcher.step(source, pose), registered, reference,
             degeneracy.basis_scaled, degeneracy.characteristic_length,

@@ -55,27 +55,38 @@ class StartSweeps:
         reach_m: range at which rotations are judged [m]. Default 10.
         max_gap_s: longest time between the first and the last kept sweep over which the
             twist counts as constant [s]; beyond it nothing is rebuilt. Default 0.5.
+        significance: a fused speed below this many of its standard deviations counts as
+            none. Default 3.
     """
 
     def __init__(self, count: int = 2, tolerance_m: float = 0.01, reach_m: float = 10.0,
-                 max_gap_s: float = 0.5):
+                 max_gap_s: float = 0.5, significance: float = 3.0):
         if count < 2:
             raise ValueError(f"count must be >= 2, got {count}")
         self.count = count
         self.tolerance_m = tolerance_m
         self.reach_m = reach_m
         self.max_gap_s = max_gap_s
+        self.significance = significance
         self._sweeps: list[StartSweep] | None = None
+
+    @property
+    def due(self) -> bool:
+        """The next sweep added to the same map completes the kept ones (its twist is used)."""
+        return self._sweeps is not None and len(self._sweeps) == self.count - 1
 
     def reset(self) -> None:
         """Stop keeping sweeps (until the next sweep into an empty map)."""
         self._sweeps = None
 
-    def add(self, sweep: StartSweep, map_was_empty: bool,
-            twist: np.ndarray) -> list[StartSweep] | None:
+    def add(self, sweep: StartSweep, map_was_empty: bool, twist: np.ndarray,
+            speed_sigma: float | None = 0.0) -> list[StartSweep] | None:
         """Record a sweep just inserted into the map (``map_was_empty``: the first of a new
         map) with the fused body twist of the LiDAR at its last point (``(v [m/s],
-        w [rad/s])`` in ``os_lidar``).
+        w [rad/s])`` in ``os_lidar``) and the standard deviation of the fused speed [m/s]
+        (None: unknown). A speed below ``significance`` times its sigma counts as none: after
+        two sweeps without wheels the fused speed of a robot at rest in a degenerate place
+        is what a sliding registration made it (the rotation comes from the gyro and is kept).
 
         Returns:
             None, or once the ``count``-th sweep is in and the motion differs from the one
@@ -91,7 +102,10 @@ class StartSweeps:
         if len(self._sweeps) < self.count:
             return None
         sweeps, self._sweeps = self._sweeps, None
-        return self._remotioned(sweeps, np.asarray(twist, dtype=float).reshape(6))
+        twist = np.array(twist, dtype=float).reshape(6)
+        if speed_sigma is None or not np.linalg.norm(twist[:3]) > self.significance * speed_sigma:
+            twist[:3] = 0.0
+        return self._remotioned(sweeps, twist)
 
     def _remotioned(self, sweeps: list[StartSweep], twist: np.ndarray) -> list[StartSweep] | None:
         if not (0 < sweeps[-1].t_last - sweeps[0].t_last <= self.max_gap_s
