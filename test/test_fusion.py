@@ -560,3 +560,26 @@ def test_gravity_tracking_is_bounded_and_gated() -> None:
     out = est.update(2.0, exp(np.array([0, 0, 0, -0.2, 0, 0])))  # beyond the 0.05 rad gate
     np.testing.assert_allclose(out.gravity_tilt, before)
     assert est.initialize(2.1).gravity_tilt.tolist() == [0.0, 0.0]  # a new frame: along -z
+
+
+def test_velocity_sigma_is_the_velocity_marginal_and_shrinks_with_measurements() -> None:
+    """A steady IMU alone does not make the start's zero velocity certain (it cannot tell
+    rest from driving at constant speed): the prior stays loose without wheels at rest, and
+    the LiDAR's positions then pin the velocity down."""
+    est = FusionEstimator(config())
+    assert est.velocity_sigma() is None
+    feed_imu(est, -0.5, 0.3, (0.0, 0.0, G))
+    est.initialize(0.0)
+    loose = est.velocity_sigma()
+    assert loose == pytest.approx(est.config.prior_sigma_velocity_moving, rel=1e-6)
+    for k, t in enumerate((0.1, 0.2, 0.3), start=1):
+        assert est.update(t, pose(t=(0.25 * k, 0.0, 0.0))) is not None
+    assert est.velocity_sigma() < 0.5 * loose
+    assert est.last_output.velocity[0] > 1.5  # 2.5 m/s measured, not held at zero
+    with_wheels = FusionEstimator(config())
+    feed_imu(with_wheels, -0.5, 0.0, (0.0, 0.0, G))
+    for t in (-0.3, -0.2, -0.1, 0.0):
+        with_wheels.add_wheel(t, pose())  # the wheels report rest as well
+    with_wheels.initialize(0.0)
+    assert with_wheels.velocity_sigma() == pytest.approx(
+        with_wheels.config.prior_sigma_velocity, rel=1e-6)
