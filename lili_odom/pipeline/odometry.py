@@ -471,8 +471,10 @@ class OdometryPipeline:
             self._worker.update_map(map_points, inserted)
         if self.config.redeskew_start and self.config.scan_matcher.deskew:
             twist = geometry.adjoint(np.linalg.inv(T_bl)) @ self._body_twist(fused)
+            used = (geometry.orthonormalize(sweep_motion)
+                    if geometry.is_valid_pose(sweep_motion, 1e-3) else np.eye(4))  # as deskewed
             redo = self._start_sweeps.add(
-                StartSweep(points, times, sweep_motion, inserted, t_first, t_ref),
+                StartSweep(points, times, used, inserted, t_first, t_ref),
                 map_was_empty, twist, est.velocity_sigma() if self._start_sweeps.due else 0.0)
             if redo is not None:
                 self._rebuild_map(redo)

@@ -32,7 +32,8 @@ class StartSweep:
     Attributes:
         points: (N, 3) the sweep's points as given to the scan matcher (``os_lidar``) [m].
         times: (N,) their per-point times [s] (empty or constant: not deskewed).
-        motion: 4x4 LiDAR motion from the first to the last point time it was deskewed with.
+        motion: 4x4 LiDAR motion from the first to the last point time it was deskewed with
+            (a valid rigid transform).
         pose: 4x4 ``T_odom_lidar`` it was inserted at (time of its last point).
         t_first / t_last: stamps of its first and last point [s].
     """
@@ -49,7 +50,7 @@ class StartSweeps:
     """The first sweeps of each new map, until the motion they were deskewed with is checked.
 
     Args:
-        count: sweeps kept (at least 2: the motion comes from the first and the last). Default 2.
+        count: sweeps kept, at least 2 (the twist at the last is used for all). Default 2.
         tolerance_m: largest change of a point's deskewed position, at ``reach_m`` from the
             sensor, that leaves the map as it is [m]. Default 0.01.
         reach_m: range at which rotations are judged [m]. Default 10.
