@@ -240,7 +240,8 @@ def missing_inputs(reader: Any, config: NodeConfig) -> list[str]:
     """One line per IMU or wheel topic of ``config`` that ``reader`` (a bag) does not have,
     naming the bag's topics of that message type (none for readers without a topic list)."""
     types = getattr(reader, "topic_types", None)
-    if not isinstance(types, dict):
+    missing = getattr(reader, "missing_topics", None)
+    if not isinstance(types, dict) or not isinstance(missing, list):
         return []
     effect = {"imu_topic": ("sensor_msgs/msg/Imu", "the prediction falls back to the motion "
                             "model"),
@@ -249,7 +250,7 @@ def missing_inputs(reader: Any, config: NodeConfig) -> list[str]:
     notes = []
     for name, (msgtype, consequence) in effect.items():
         topic = getattr(config, name)
-        if topic in types:
+        if topic not in missing:
             continue
         others = sorted(t for t, m in types.items()
                         if m == msgtype and t != config.ground_truth_topic)

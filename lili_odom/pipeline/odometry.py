@@ -16,10 +16,11 @@ measured offline is what runs on the robot. Per scan (``process_scan``):
    that process);
 5. on a degenerate scan with wheel data the registration is held at the wheels' prediction
    along the subspace (solution remapping, :mod:`lili_odom.pipeline.remap`); directions
-   outside the subspace that point-to-plane barely holds join it, and the registration is checked by
-   point-to-plane along the direction of travel left outside it (point-to-point ICP against a
-   young or sparse map lags along it); the registration is then refined inside the subspace
-   by point-to-plane Gauss-Newton, which measures what the LiDAR still knows there
+   outside the subspace that point-to-plane barely holds join it, and the registration is
+   checked by point-to-plane along the direction of travel left outside it (point-to-point
+   ICP against a young or sparse map lags along it); the registration is then refined
+   inside the subspace by point-to-plane Gauss-Newton, which measures what the LiDAR still
+   knows there
    (:mod:`lili_odom.pipeline.plane_refinement`);
 6. iSAM2 fuses IMU preintegration, the LiDAR registration with the degenerate directions
    removed, the LiDAR's own (Hessian-weighted) measurement inside them and the wheel
@@ -54,7 +55,7 @@ from lili_odom.pipeline.detection_worker import PENDING, DetectionWorker
 from lili_odom.pipeline.plane_refinement import (PlaneFitCache, PlaneRefinementConfig,
                                                  refine_in_subspace)
 from lili_odom.pipeline.remap import constrained_registration
-from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig
+from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig, deskew_motion
 from lili_odom.pipeline.start_sweeps import StartSweep, StartSweeps
 from lili_odom.pipeline.types import ImuSample, OdometryOutput, Scan, WheelSample
 from lili_odom.pipeline.validation import checked_scan
@@ -259,7 +260,6 @@ class OdometryPipeline:
         """
         old = self.estimator
         self._matcher.reset()
-        self._start_sweeps.reset()
         self._forget_detections(new_map=True)
         self._new_estimator()
         if keep_from is not None and self._last_stamp is not None:
@@ -463,19 +463,19 @@ class OdometryPipeline:
 
         t0 = time.perf_counter()
         fused_lidar = fused.pose @ T_bl
+        twist = self._body_twist(fused)
         map_was_empty = self._matcher.map_empty
         inserted = self._matcher.update_map(map_points, fused_lidar,
                                             np.linalg.inv(guess) @ fused_lidar)
         self._start_worker()
         if self._worker is not None and self._worker.alive:
             self._worker.update_map(map_points, inserted)
-        if self.config.redeskew_start and self.config.scan_matcher.deskew:
-            twist = geometry.adjoint(np.linalg.inv(T_bl)) @ self._body_twist(fused)
-            used = (geometry.orthonormalize(sweep_motion)
-                    if geometry.is_valid_pose(sweep_motion, 1e-3) else np.eye(4))  # as deskewed
+        if (self.config.redeskew_start and self.config.scan_matcher.deskew
+                and (map_was_empty or self._start_sweeps.collecting)):
             redo = self._start_sweeps.add(
-                StartSweep(points, times, used, inserted, t_first, t_ref),
-                map_was_empty, twist, est.velocity_sigma() if self._start_sweeps.due else 0.0)
+                StartSweep(points, times, deskew_motion(sweep_motion), inserted, t_first, t_ref),
+                map_was_empty, geometry.adjoint(np.linalg.inv(T_bl)) @ twist,
+                est.velocity_sigma() if self._start_sweeps.due else 0.0)
             if redo is not None:
                 self._rebuild_map(redo)
                 warnings.append("local map rebuilt from its first sweeps deskewed again")
@@ -484,7 +484,6 @@ class OdometryPipeline:
         timings["map"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_start
 
-        twist = self._body_twist(fused)
         out = OdometryOutput(
             stamp=t_ref,
             pose=fused.pose,

@@ -136,7 +136,7 @@ class ScanMatcher:
             # that aborts the process inside Sophus, and so does a span that overflows to
             # inf (finite times near +-1e308). An empty time array skips deskewing.
             times = np.zeros(0)
-        motion = orthonormalize(sweep_motion) if is_valid_pose(sweep_motion, 1e-3) else np.eye(4)
+        motion = deskew_motion(sweep_motion)
         v = self.config.voxel
         points = np.asarray(points)
         keep = first_in_voxel(points, 0.5 * v)
@@ -197,6 +197,12 @@ class ScanMatcher:
     def map_points(self) -> np.ndarray:
         """(M, 3) points of the local map in the odometry frame [m]."""
         return np.asarray(self.voxel_map.point_cloud()).reshape(-1, 3)
+
+
+def deskew_motion(sweep_motion: np.ndarray) -> np.ndarray:
+    """The sweep motion a sweep is deskewed with: ``sweep_motion`` re-orthonormalised, or the
+    identity (no deskew) when it is not a valid rigid transform."""
+    return orthonormalize(sweep_motion) if is_valid_pose(sweep_motion, 1e-3) else np.eye(4)
 
 
 def insert_scan(reference: ReferenceMap, points: np.ndarray, pose: np.ndarray) -> None:

@@ -72,13 +72,15 @@ class StartSweeps:
         self._sweeps: list[StartSweep] | None = None
 
     @property
+    def collecting(self) -> bool:
+        """Sweeps of the current map are being kept (a sweep into a non-empty map is added
+        only then)."""
+        return self._sweeps is not None
+
+    @property
     def due(self) -> bool:
         """The next sweep added to the same map completes the kept ones (its twist is used)."""
         return self._sweeps is not None and len(self._sweeps) == self.count - 1
-
-    def reset(self) -> None:
-        """Stop keeping sweeps (until the next sweep into an empty map)."""
-        self._sweeps = None
 
     def add(self, sweep: StartSweep, map_was_empty: bool, twist: np.ndarray,
             speed_sigma: float | None = 0.0) -> list[StartSweep] | None:
