@@ -352,3 +352,48 @@ def test_a_forked_child_builds_its_own_trees():
     assert child.exitcode == 0
     assert got == (len(ref.points), len(ref.points))
     assert ref.kdtree.n == len(ref.points)
+
+
+def test_plane_cost_is_lower_at_the_pose_that_fits():
+    from lili_odom.pipeline.plane_refinement import plane_cost
+
+    world = corridor(40.0, end_walls=True)
+    ref = ReferenceMap.from_points(world, 1.0, 200)
+    scan = scan_at(world, 25.0)
+    fits = fit_planes(scan, ref, pose_at(25.2))
+    assert plane_cost(fits, pose_at(25.0)) < 0.5 * plane_cost(fits, pose_at(25.2))
+    assert plane_cost(fits, pose_at(25.0)) < plane_cost(fits, pose_at(24.9))
+    empty = fit_planes(scan, ReferenceMap.from_points(world[:3], 1.0, 200), pose_at(25.0))
+    assert plane_cost(empty, pose_at(25.0)) == float("inf")
+
+
+def _refined_from(pipeline, world, scan_x, measured_x, guess_x):
+    from lili_odom.degeneracy.result import DegeneracyResult
+
+    det = DegeneracyResult("lili", np.eye(4), AXIS_X, 10.0)
+    fits = planes(pipeline, scan_at(world, scan_x))
+    measured = pose_at(measured_x)
+    first = refine_in_subspace(fits.points, fits.reference, measured, AXIS_X, 10.0,
+                               pipeline.config.plane_refinement, fits=fits.at(measured))
+    return first, pipeline._refined_from_prediction(fits, first, measured, pose_at(guess_x),
+                                                    det)
+
+
+def test_without_wheels_the_refinement_also_starts_at_the_prediction():
+    # a registration dragged 0.5 m back: the end wall's planes are beyond the refinement's
+    # residual gate from there, and the refinement started at the prediction finds them
+    closed = corridor(40.0, end_walls=True)
+    pipeline = _pipeline_over(closed, 24.8)
+    first, chosen = _refined_from(pipeline, closed, 25.0, 24.5, 25.05)
+    assert abs(first.pose[0, 3] - 25.0) > 0.2
+    assert abs(chosen.pose[0, 3] - 25.0) < 0.02
+    assert pipeline.counters["refined_from_prediction"] == 1
+    # in a tube the planes hold nothing along the axis: the registration's refinement stays
+    tube = corridor(200.0, end_walls=False)
+    pipeline = _pipeline_over(tube, 99.8)
+    first, chosen = _refined_from(pipeline, tube, 100.0, 99.7, 100.05)
+    assert chosen is first and pipeline.counters["refined_from_prediction"] == 0
+    # a prediction within 2 cm of the registration is not refined twice
+    pipeline = _pipeline_over(closed, 24.8)
+    first, chosen = _refined_from(pipeline, closed, 25.0, 25.0, 25.01)
+    assert chosen is first and pipeline.counters["refined_from_prediction"] == 0

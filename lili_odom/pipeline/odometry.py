@@ -49,11 +49,11 @@ from lili_odom.errors import ThrottledWarnings
 from lili_odom.fusion.config import FusionConfig
 from lili_odom.degeneracy.subspace import orthonormal_rows
 from lili_odom.fusion.estimator import FusionEstimator, SubspaceMeasurement
-from lili_odom.fusion.subspace import scaled_lidar_to_base
+from lili_odom.fusion.subspace import remap_pose, scaled_lidar_to_base
 from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionScheduleConfig
 from lili_odom.pipeline.detection_worker import PENDING, DetectionWorker
 from lili_odom.pipeline.plane_refinement import (PlaneFitCache, PlaneRefinementConfig,
-                                                 refine_in_subspace)
+                                                 plane_cost, refine_in_subspace)
 from lili_odom.pipeline.remap import constrained_registration
 from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig, deskew_motion
 from lili_odom.pipeline.start_sweeps import StartSweep, StartSweeps
@@ -434,6 +434,9 @@ class OdometryPipeline:
                                          degeneracy.basis_scaled,
                                          degeneracy.characteristic_length, refine,
                                          fits=planes.at(measured))
+            if refine.predicted_start and est.wheel_prediction(t_ref) is None:
+                refined = self._refined_from_prediction(planes, refined, measured, guess,
+                                                        degeneracy)
             if refined.ok:
                 degeneracy, info = self._clear_held_directions(degeneracy, refined)
                 measured = refined.pose
@@ -666,6 +669,44 @@ class OdometryPipeline:
         if not remapped.ok:
             self.counters["remap_failures"] += 1
         return remapped.pose
+
+    def _refined_from_prediction(self, planes: PlaneFitCache, refined, measured: np.ndarray,
+                                 guess: np.ndarray, degeneracy: DegeneracyResult):
+        """Without wheel data, the refinement inside the subspace run again from the
+        prediction's components there (``guess``, the fused motion model), and the one of the
+        two whose pose fits the planes better kept (:func:`plane_cost` on both starts' planes).
+
+        A registration that slides along a weakly held direction can end beyond the
+        refinement's residual gate from the surfaces that hold it (on open ground the
+        point-to-point pull of the ground's rings drags a sparse scan back towards the last
+        pose), so the refinement started there finds too few of them; started at the
+        prediction it finds them. The prediction's refinement is kept only when the planes hold
+        every direction of the subspace there (``min_along_information``) and fit better;
+        where they hold nothing (a featureless tunnel) both fit alike, and keeping the
+        prediction would only confirm the fused velocity, so the registration's stays.
+        """
+        refine = self.config.plane_refinement
+        start = remap_pose(measured, guess, degeneracy.basis_scaled,
+                           degeneracy.characteristic_length)
+        if np.linalg.norm(start[:3, 3] - measured[:3, 3]) < 0.02:
+            return refined
+        fits_registration = planes.at(measured)
+        fits_prediction = planes.at(start)
+        other = refine_in_subspace(planes.points, planes.reference, start,
+                                   degeneracy.basis_scaled, degeneracy.characteristic_length,
+                                   refine, fits=fits_prediction)
+        if not (other.ok and other.information.size
+                and np.all(np.isfinite(other.information))):
+            return refined
+        if np.linalg.eigvalsh(other.information)[0] < refine.min_along_information:
+            return refined
+        if refined.ok:
+            cost = [plane_cost(fits_registration, r.pose, refine)
+                    + plane_cost(fits_prediction, r.pose, refine) for r in (refined, other)]
+            if not cost[1] < cost[0]:
+                return refined
+        self.counters["refined_from_prediction"] += 1
+        return other
 
     def _travel(self, guess: np.ndarray) -> np.ndarray:
         """Predicted translation [m] of the LiDAR since the previous output (odometry frame)."""

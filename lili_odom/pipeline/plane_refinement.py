@@ -44,7 +44,7 @@ from lili_odom.degeneracy.reference import ReferenceMap, kdtree_workers
 from lili_odom.degeneracy.subspace import orthonormal_rows
 
 __all__ = ["PlaneFitCache", "PlaneFits", "PlaneRefinementConfig", "PlaneRefinement", "fit_planes",
-           "plane_jacobians", "refine_in_subspace"]
+           "plane_cost", "plane_jacobians", "refine_in_subspace"]
 
 
 #: Values of ``PlaneRefinementConfig.refine_constrained``.
@@ -99,6 +99,10 @@ class PlaneRefinementConfig:
             at least this [1/m^2] is measured by the refined pose like a constrained one and
             removed from the degenerate subspace (default 2500: a 2 cm sigma, the configured
             LiDAR translation sigma); 0 = never.
+        predicted_start: without wheel data, the refinement inside the subspace is also run
+            from the fused prediction's components there and kept when it fits the planes
+            better and they hold every direction of the subspace to
+            ``min_along_information``; default True.
     """
 
     enabled: bool = True
@@ -120,6 +124,7 @@ class PlaneRefinementConfig:
     min_along_information: float = 100.0
     clear_information: float = 2500.0
     refine_constrained: str = "planar"
+    predicted_start: bool = True
 
     def validate(self, prefix: str = "plane_refinement.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -326,6 +331,23 @@ class PlaneFitCache:
             self._fits = fit_planes(self.points, self.reference, pose, self.config)
             self.queries += 1
         return self._fits
+
+
+def plane_cost(fits: PlaneFits, pose: np.ndarray,
+               config: PlaneRefinementConfig | None = None) -> float:
+    """Mean robust point-to-plane cost of the scan placed at ``pose`` on ``fits``
+    (dimensionless, lower fits better): the Cauchy loss ``log(1 + (r / kernel)^2)`` of every
+    fitted plane's residual, each residual capped at ``max_residual`` so a point that found
+    no surface counts as a bad one rather than not at all. Two poses scored on the same fits
+    are compared on the same points and planes."""
+    cfg = config or PlaneRefinementConfig()
+    if not np.any(fits.valid):
+        return float("inf")
+    pose = np.asarray(pose, dtype=float)
+    q = fits.points[fits.valid] @ pose[:3, :3].T + pose[:3, 3]
+    r = np.einsum("ij,ij->i", fits.normals[fits.valid], q - fits.centroids[fits.valid])
+    r = np.minimum(np.abs(r), cfg.max_residual)
+    return float(np.mean(np.log1p((r / cfg.kernel) ** 2)))
 
 
 def _debiased(H: np.ndarray, points: np.ndarray, to_twist: np.ndarray,
