@@ -2,9 +2,10 @@
 of its row (``submit(job) -> Future[dict]``); the runner collects rows as they finish.
 
 * :class:`LocalBackend` (``--backend local``): up to ``jobs`` jobs at a time on this machine,
-  each in its own fresh process (``spawn``), so a native abort (KISS-ICP, GTSAM, a peer) or a
-  crash ends only that job: it becomes a row with ``error`` naming the exit signal. A job's
-  stdout/stderr (native libraries print there) go to ``<job dir>/log.txt``.
+  each in its own fresh, non-daemonic process (``spawn``; our odometry starts its background
+  detector process in it, as ``lili-odom run`` does), so a native abort (KISS-ICP, GTSAM, a
+  peer) or a crash ends only that job: it becomes a row with ``error`` naming the exit
+  signal. A job's stdout/stderr (native libraries print there) go to ``<job dir>/log.txt``.
 
 * :class:`~lili_odom.suite.ray_backend.RayBackend` (``--backend ray``): one Ray task per job
   on a Ray cluster or a Ray instance on this machine (``pip install 'lili_odom[cluster]'``).
@@ -106,7 +107,10 @@ class LocalBackend:
             return error_row(job, "cancelled")
         recv, send = self._ctx.Pipe(duplex=False)
         log_path = str(Path(job.out_dir) / "log.txt")
-        proc = self._ctx.Process(target=_child_main, args=(job, send, log_path), daemon=True)
+        # not daemonic: the odometry in it starts its background detector process, as
+        # `lili-odom run` does (a daemonic process may not have children); the finally below
+        # and shutdown() stop it
+        proc = self._ctx.Process(target=_child_main, args=(job, send, log_path), daemon=False)
         with self._lock:
             proc.start()
             self._running.add(proc)
