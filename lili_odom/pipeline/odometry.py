@@ -52,8 +52,9 @@ from lili_odom.fusion.estimator import FusionEstimator, SubspaceMeasurement
 from lili_odom.fusion.subspace import remap_pose, scaled_lidar_to_base
 from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionScheduleConfig
 from lili_odom.pipeline.detection_worker import PENDING, DetectionWorker
-from lili_odom.pipeline.plane_refinement import (PlaneFitCache, PlaneRefinementConfig,
-                                                 plane_cost, refine_in_subspace)
+from lili_odom.pipeline.plane_refinement import (PlaneFitCache, PlaneRefinement,
+                                                 PlaneRefinementConfig, plane_cost,
+                                                 refine_in_subspace)
 from lili_odom.pipeline.remap import constrained_registration
 from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig, deskew_motion
 from lili_odom.pipeline.start_sweeps import StartSweep, StartSweeps
@@ -670,8 +671,9 @@ class OdometryPipeline:
             self.counters["remap_failures"] += 1
         return remapped.pose
 
-    def _refined_from_prediction(self, planes: PlaneFitCache, refined, measured: np.ndarray,
-                                 guess: np.ndarray, degeneracy: DegeneracyResult):
+    def _refined_from_prediction(self, planes: PlaneFitCache, refined: PlaneRefinement,
+                                 measured: np.ndarray, guess: np.ndarray,
+                                 degeneracy: DegeneracyResult) -> PlaneRefinement:
         """Without wheel data, the refinement inside the subspace run again from the
         prediction's components there (``guess``, the fused motion model), and the one of the
         two whose pose fits the planes better kept (:func:`plane_cost` on both starts' planes).
@@ -689,7 +691,7 @@ class OdometryPipeline:
         start = remap_pose(measured, guess, degeneracy.basis_scaled,
                            degeneracy.characteristic_length)
         if np.linalg.norm(start[:3, 3] - measured[:3, 3]) < 0.02:
-            return refined
+            return refined  # the two starts share their planes: one refinement is enough
         fits_registration = planes.at(measured)
         fits_prediction = planes.at(start)
         other = refine_in_subspace(planes.points, planes.reference, start,
