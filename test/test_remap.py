@@ -115,10 +115,10 @@ def test_the_pipeline_remaps_to_the_wheels_only_and_keeps_the_registration_witho
     source = source[np.linalg.norm(source, axis=1) < 15.0]
     registered = g.exp(np.array([0.4, 0.0, 0.0, 0.0, 0.0, 0.0]))  # slid 0.4 m along x
     axis = DegeneracyResult("lili", registered, _scaled_rows([[1, 0, 0, 0, 0, 0]]), L)
-    out = p._remap(source, registered, 10.1, axis)
+    out = p._remap(source, registered, p.estimator.wheel_prediction(10.1), axis)
     assert out is registered and p.counters["remap_without_wheels"] == 1
     for t in (9.9, 10.0, 10.1):  # the wheels report standing still
         p.estimator.add_wheel(t, np.eye(4))
-    out = p._remap(source, registered, 10.1, axis)
+    out = p._remap(source, registered, p.estimator.wheel_prediction(10.1), axis)
     assert abs(g.log(out)[0]) < 0.02  # held at the wheels' prediction: the origin
     assert p.counters["remap_without_wheels"] == 1

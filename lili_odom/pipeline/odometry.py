@@ -37,7 +37,7 @@ import logging
 import time
 from collections import Counter
 from dataclasses import dataclass, field, replace
-from functools import partial
+from functools import cache, partial
 
 import numpy as np
 
@@ -402,9 +402,10 @@ class OdometryPipeline:
         timings["detector"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
+        wheel_prediction = cache(partial(est.wheel_prediction, t_ref))  # at most once a scan
         measured = reg.pose
         if self._remaps(degeneracy):
-            measured = self._remap(source, reg.pose, t_ref, degeneracy)
+            measured = self._remap(source, reg.pose, wheel_prediction(), degeneracy)
         timings["remap"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
@@ -414,14 +415,14 @@ class OdometryPipeline:
             if weak is not None:
                 degeneracy = weak
                 if self._remaps(degeneracy):
-                    measured = self._remap(source, reg.pose, t_ref, degeneracy)
+                    measured = self._remap(source, reg.pose, wheel_prediction(), degeneracy)
             along = self._along_track(planes, measured, guess, degeneracy)
             if along is not None and along.ok:
                 measured = along.pose
             elif along is not None:
                 degeneracy = along.degeneracy
                 if self._remaps(degeneracy):
-                    measured = self._remap(source, reg.pose, t_ref, degeneracy)
+                    measured = self._remap(source, reg.pose, wheel_prediction(), degeneracy)
             if reg.ok:
                 measured = self._refine_constrained(planes, measured, degeneracy)
         timings["along_track"] = time.perf_counter() - t0
@@ -435,7 +436,7 @@ class OdometryPipeline:
                                          degeneracy.basis_scaled,
                                          degeneracy.characteristic_length, refine,
                                          fits=planes.at(measured))
-            if refine.predicted_start and est.wheel_prediction(t_ref) is None:
+            if refine.predicted_start and wheel_prediction() is None:
                 refined = self._refined_from_prediction(planes, refined, measured, guess,
                                                         degeneracy)
             if refined.ok:
@@ -647,10 +648,12 @@ class OdometryPipeline:
         return bool(self.config.remap_iterations and degeneracy is not None and degeneracy.ok
                     and degeneracy.degenerate)
 
-    def _remap(self, source: np.ndarray, registered: np.ndarray, t_ref: float,
+    def _remap(self, source: np.ndarray, registered: np.ndarray, wheel: np.ndarray | None,
                degeneracy: DegeneracyResult) -> np.ndarray:
-        """The registration held at the wheels' prediction along the degenerate subspace
-        (solution remapping), ``T_odom_lidar``; the registration itself without wheel data.
+        """The registration held at the wheels' prediction ``wheel`` (base_link pose, odometry
+        frame, :meth:`FusionEstimator.wheel_prediction`) along the degenerate subspace
+        (solution remapping), ``T_odom_lidar``; the registration itself without wheel data
+        (``wheel`` None).
 
         Only the wheels' prediction: the IMU's prediction carries the fused velocity, which a
         measurement held at it only confirms; the refinement inside the subspace then starts
@@ -658,7 +661,6 @@ class OdometryPipeline:
         farther, so the IMU would drift on unchecked (a tunnel with a few features during a
         wheel outage).
         """
-        wheel = self.estimator.wheel_prediction(t_ref)
         if wheel is None:
             self.counters["remap_without_wheels"] += 1
             return registered

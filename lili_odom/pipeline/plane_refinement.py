@@ -333,6 +333,13 @@ class PlaneFitCache:
         return self._fits
 
 
+def _residuals(normals: np.ndarray, centroids: np.ndarray, points: np.ndarray,
+               pose: np.ndarray) -> np.ndarray:
+    """Signed point-to-plane residuals [m] of LiDAR-frame ``points`` placed at ``pose`` on the
+    planes (``normals``, ``centroids``, odometry frame), one per row."""
+    return np.einsum("ij,ij->i", normals, points @ pose[:3, :3].T + pose[:3, 3] - centroids)
+
+
 def plane_cost(fits: PlaneFits, pose: np.ndarray,
                config: PlaneRefinementConfig | None = None) -> float:
     """Mean robust point-to-plane cost of the scan placed at ``pose`` on ``fits``
@@ -343,9 +350,9 @@ def plane_cost(fits: PlaneFits, pose: np.ndarray,
     cfg = config or PlaneRefinementConfig()
     if not np.any(fits.valid):
         return float("inf")
-    pose = np.asarray(pose, dtype=float)
-    q = fits.points[fits.valid] @ pose[:3, :3].T + pose[:3, 3]
-    r = np.einsum("ij,ij->i", fits.normals[fits.valid], q - fits.centroids[fits.valid])
+    v = fits.valid
+    r = _residuals(fits.normals[v], fits.centroids[v], fits.points[v],
+                   np.asarray(pose, dtype=float))
     r = np.minimum(np.abs(r), cfg.max_residual)
     return float(np.mean(np.log1p((r / cfg.kernel) ** 2)))
 
@@ -412,17 +419,15 @@ def refine_in_subspace(
     min_used = max(10, 2 * kdim)
     # one association at the start pose: the planes stay fixed while the pose moves inside
     # the subspace (steps are bounded by max_step, the planes are local surfaces)
-    q = pts @ pose[:3, :3].T + pose[:3, 3]
     normals, centroids, tilt_var = fits.normals, fits.centroids, fits.tilt_var
-    valid = fits.valid & (np.abs(np.einsum("ij,ij->i", normals, q - centroids))
-                          <= cfg.max_residual)
+    valid = fits.valid & (np.abs(_residuals(normals, centroids, pts, pose)) <= cfg.max_residual)
     used = int(valid.sum())
     if used < min_used:
         return empty("too few plane correspondences", used)
     p_used, n_used, c_used, var_used = pts[valid], normals[valid], centroids[valid], tilt_var[valid]
     for it in range(cfg.iterations + 1):
-        R, t = pose[:3, :3], pose[:3, 3]
-        r = np.einsum("ij,ij->i", n_used, p_used @ R.T + t - c_used)
+        R = pose[:3, :3]
+        r = _residuals(n_used, c_used, p_used, pose)
         J = plane_jacobians(p_used, n_used @ R) @ to_twist  # (m, k)
         w = 1.0 / (1.0 + (r / cfg.kernel) ** 2)
         JW = J * w[:, None]
@@ -436,7 +441,7 @@ def refine_in_subspace(
             step *= cfg.max_step / n
         pose = geometry.orthonormalize(pose @ geometry.exp(to_twist @ step))
         if n < 1e-4:
-            r = np.einsum("ij,ij->i", n_used, p_used @ pose[:3, :3].T + pose[:3, 3] - c_used)
+            r = _residuals(n_used, c_used, p_used, pose)
             w = 1.0 / (1.0 + (r / cfg.kernel) ** 2)
             H = (J * w[:, None]).T @ J
             break
