@@ -144,7 +144,7 @@ def test_sensor_models_are_deterministic_per_seed(traj1):
     assert not np.allclose(Trajectory(world, world.trials[1], seed=4).pose(t), Trajectory(world, world.trials[1], seed=3).pose(t))
 
 
-@pytest.mark.parametrize("name", ["tunnel", "corridor", "open_field"])
+@pytest.mark.parametrize("name", ["tunnel", "corridor", "open_field", "orchard"])
 def test_every_shipped_trial_is_a_valid_husky_motion(name):
     world = load_world(name)
     for trial, plan in world.trials.items():

@@ -9,7 +9,7 @@ from lili_odom.sim.mesh import build_mesh
 from lili_odom.sim.world import Segment, load_world
 
 
-@pytest.mark.parametrize("name", ["tunnel", "corridor", "open_field"])
+@pytest.mark.parametrize("name", ["tunnel", "corridor", "open_field", "orchard"])
 def test_worlds_load_and_mesh(name):
     world = load_world(name)
     mesh = build_mesh(world)
