@@ -397,3 +397,60 @@ def test_without_wheels_the_refinement_also_starts_at_the_prediction():
     pipeline = _pipeline_over(closed, 24.8)
     first, chosen = _refined_from(pipeline, closed, 25.0, 25.0, 25.01)
     assert chosen is first and pipeline.counters["refined_from_prediction"] == 0
+
+
+def poles_on_ground(seed: int = 0) -> np.ndarray:
+    """Flat ground (z = 0, 40 x 40 m) with six thin vertical poles (radius 0.1 m, 4 m high),
+    each sampled on the half facing the origin (what a sensor near it sees)."""
+    rng = np.random.default_rng(seed)
+    g = np.arange(-20.0, 20.0, 0.4)
+    X, Y = np.meshgrid(g, g)
+    ground = np.c_[X.ravel(), Y.ravel(), np.zeros(X.size)]
+    poles = []
+    for cx, cy in ((6.0, 4.0), (-5.0, 7.0), (9.0, -6.0), (-8.0, -5.0), (2.0, -9.0), (12.0, 1.0)):
+        z = np.arange(0.0, 4.0, 0.05)
+        a = np.arctan2(-cy, -cx) + rng.uniform(-0.5 * np.pi, 0.5 * np.pi, len(z))
+        poles.append(np.c_[cx + 0.1 * np.cos(a), cy + 0.1 * np.sin(a), z])
+    pts = np.vstack([ground] + poles)
+    return pts + rng.normal(0.0, 0.005, pts.shape)
+
+
+@pytest.mark.parametrize("axis", [AXIS_X, AXIS_Y])
+def test_vertical_lines_hold_open_ground_across_the_poles(axis):
+    world = poles_on_ground()
+    ref = ReferenceMap.from_points(world, 1.0, 200)
+    scan = scan_at(world, 0.0, n=20000)
+    truth = pose_at(0.0)
+    start = truth.copy()
+    start[:3, 3] += 0.1 * axis[0, :3]  # 10 cm off across the poles
+    cfg = PlaneRefinementConfig(points=20000)
+    with_lines = refine_in_subspace(scan, ref, start, axis, 1.0, cfg)
+    planes_only = refine_in_subspace(scan, ref, start, axis, 1.0,
+                                     PlaneRefinementConfig(points=20000, vertical_lines=False))
+    assert with_lines.ok and with_lines.information[0, 0] > 1000.0
+    assert np.linalg.norm(with_lines.pose[:3, 3] - truth[:3, 3]) < 0.02
+    # the ground's normals say nothing across the poles, the few planar patches of the
+    # poles' surface little: the pose stays far off
+    assert planes_only.information[0, 0] < 0.5 * with_lines.information[0, 0]
+    assert np.linalg.norm(planes_only.pose[:3, 3] - truth[:3, 3]) > 0.04
+
+
+@pytest.mark.parametrize("tilt_deg, used", [(0.0, True), (15.0, True), (45.0, False),
+                                             (90.0, False)])
+def test_only_near_vertical_lines_are_used(tilt_deg, used):
+    """A pole is a vertical line; a sparse scan's ring on the ground or a wall is a
+    horizontal one that moves with the sensor and must not become a constraint."""
+    u = np.array([np.sin(np.deg2rad(tilt_deg)), 0.0, np.cos(np.deg2rad(tilt_deg))])
+    t = np.arange(-3.0, 3.0, 0.05)
+    lines = np.vstack([np.array([4.0, y, 2.0]) + t[:, None] * u for y in (-3.0, 3.0)])
+    ref = ReferenceMap.from_points(lines, 1.0, 200)
+    scan = lines[10:-10:3] - [0.0, 0.0, 1.5]  # sensor frame at pose_at(0)
+    fits = fit_planes(scan, ref, pose_at(0.0), PlaneRefinementConfig(points=20000))
+    if not used:
+        assert not fits.valid.any() and len(fits.points) == len(scan)
+        return
+    assert fits.valid.all() and len(fits.points) == 2 * len(scan)  # two planes per point
+    n = len(scan)
+    normals = fits.normals
+    assert np.allclose(np.abs(normals @ u), 0.0, atol=0.05)  # both across the line
+    assert np.allclose(np.einsum("ij,ij->i", normals[:n], normals[n:]), 0.0, atol=1e-9)

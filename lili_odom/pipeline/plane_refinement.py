@@ -43,8 +43,8 @@ from lili_odom import geometry
 from lili_odom.degeneracy.reference import ReferenceMap, kdtree_workers
 from lili_odom.degeneracy.subspace import orthonormal_rows
 
-__all__ = ["PlaneFitCache", "PlaneFits", "PlaneRefinementConfig", "PlaneRefinement", "fit_planes",
-           "plane_cost", "plane_jacobians", "refine_in_subspace"]
+__all__ = ["PlaneFitCache", "PlaneFits", "PlaneRefinementConfig", "PlaneRefinement", "eigenvector3",
+           "fit_planes", "plane_cost", "plane_jacobians", "refine_in_subspace"]
 
 
 #: Values of ``PlaneRefinementConfig.refine_constrained``.
@@ -103,6 +103,14 @@ class PlaneRefinementConfig:
             from the fused prediction's components there and kept when it fits the planes
             better and they hold every direction of the subspace to
             ``min_along_information``; default True.
+        vertical_lines: a neighbourhood that is not planar but a near-vertical line (a pole,
+            a trunk, a mast, a door's edge) is used too, as two planes through the line: it
+            holds the point across the line, horizontally (``_lines``). Default True.
+        min_linearity: neighbourhoods with ``(l1 - l2) / l1`` at least this are lines
+            (dimensionless); default 0.8.
+        max_line_tilt_deg: lines tilted from the vertical by more than this are not used
+            [deg] (a ring of a sparse scan on the ground or on a wall is a horizontal line
+            that moves with the sensor); default 20.
     """
 
     enabled: bool = True
@@ -125,6 +133,9 @@ class PlaneRefinementConfig:
     clear_information: float = 2500.0
     refine_constrained: str = "planar"
     predicted_start: bool = True
+    vertical_lines: bool = True
+    min_linearity: float = 0.8
+    max_line_tilt_deg: float = 20.0
 
     def validate(self, prefix: str = "plane_refinement.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -149,6 +160,8 @@ class PlaneRefinementConfig:
         check_range(prefix + "weak_information", self.weak_information, 0.0, 1e12)
         check_range(prefix + "min_along_information", self.min_along_information, 0.0, 1e12)
         check_range(prefix + "clear_information", self.clear_information, 0.0, 1e12)
+        check_range(prefix + "min_linearity", self.min_linearity, 0.0, 1.0)
+        check_range(prefix + "max_line_tilt_deg", self.max_line_tilt_deg, 0.0, 90.0, unit="deg")
         if self.refine_constrained not in REFINE_CONSTRAINED:
             raise ValueError(f"{prefix}refine_constrained must be one of "
                              f"{', '.join(REFINE_CONSTRAINED)}, got '{self.refine_constrained}'")
@@ -207,16 +220,22 @@ def symmetric_eigen3(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     l_max = q + 2.0 * p * np.cos(phi)
     l_min = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
     w = np.stack([l_min, 3.0 * q - l_max - l_min, l_max], axis=1)
-    M = A - l_min[:, None, None] * np.eye(3)
+    return w, eigenvector3(A, l_min)
+
+
+def eigenvector3(A: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """Unit eigenvectors (m, 3) of symmetric 3x3 matrices ``A`` (m, 3, 3) for their simple
+    eigenvalues ``lam`` (m,): the largest cross product of two rows of ``A - lam I`` (sign
+    arbitrary; +z where ``A - lam I`` has rank below 2)."""
+    M = A - lam[:, None, None] * np.eye(3)
     r0, r1, r2 = M[:, 0], M[:, 1], M[:, 2]
     c = np.stack([np.cross(r0, r1), np.cross(r0, r2), np.cross(r1, r2)], axis=1)  # (m, 3, 3)
     n2 = np.einsum("mij,mij->mi", c, c)
     best = np.argmax(n2, axis=1)
     v = c[np.arange(len(A)), best]
     norm = np.sqrt(n2[np.arange(len(A)), best])
-    v = np.where(norm[:, None] > 0, v / np.where(norm > 0, norm, 1.0)[:, None],
-                 np.array([0.0, 0.0, 1.0]))
-    return w, v
+    return np.where(norm[:, None] > 0, v / np.where(norm > 0, norm, 1.0)[:, None],
+                    np.array([0.0, 0.0, 1.0]))
 
 
 def _covariances(d: np.ndarray) -> np.ndarray:
@@ -231,16 +250,18 @@ def _covariances(d: np.ndarray) -> np.ndarray:
     return cov
 
 
-def _planes(reference: ReferenceMap, q: np.ndarray, k: int, max_dist: float,
-            min_planarity: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _planes(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConfig
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Plane fits around ``q`` (odometry frame): (valid mask, normals, centroids, normal
-    variances).
+    variances) per point, and the rows of ``q`` on a vertical line (``_lines``) with their
+    second normal (the first is in ``normals``).
 
     The variance of a fitted normal's tilt [rad^2] is about ``l3 / (k l2)`` (out-of-plane
     scatter over the in-plane spread of ``k`` points, ``l1 >= l2 >= l3`` the eigenvalues of the
     neighbourhood covariance)."""
     pts = reference.points
-    k = min(k, len(pts))
+    k = min(cfg.normal_neighbors, len(pts))
+    max_dist = cfg.max_neighbor_distance
     # neighbours beyond max_dist come back as inf (index len(pts)) and fail the check below
     dist, idx = reference.kdtree.query(q, k=k, distance_upper_bound=max_dist,
                                        workers=kdtree_workers(len(q)))
@@ -250,19 +271,54 @@ def _planes(reference: ReferenceMap, q: np.ndarray, k: int, max_dist: float,
     normals = np.zeros((len(q), 3))
     centroids = np.zeros((len(q), 3))
     tilt_var = np.zeros(len(q))
+    no_lines = np.zeros(0, dtype=int), np.zeros((0, 3))
     if not valid.any():
-        return valid, normals, centroids, tilt_var
+        return (valid, normals, centroids, tilt_var) + no_lines
     nb = pts[idx[valid]]  # (m, k, 3)
     c = np.einsum("mkj->mj", nb) / k  # the neighbourhoods' means (faster than mean(axis=1))
-    w, normal = symmetric_eigen3(_covariances(nb - c[:, None, :]))
+    cov = _covariances(nb - c[:, None, :])
+    w, normal = symmetric_eigen3(cov)
     planarity = (w[:, 1] - w[:, 0]) / np.maximum(w[:, 2], 1e-12)
-    good = planarity >= min_planarity
+    good = planarity >= cfg.min_planarity
     sel = np.flatnonzero(valid)
     valid[sel[~good]] = False
     normals[sel[good]] = normal[good]
     centroids[sel[good]] = c[good]
     tilt_var[sel[good]] = np.maximum(w[good, 0], 0.0) / (k * np.maximum(w[good, 1], 1e-12))
-    return valid, normals, centroids, tilt_var
+    if not cfg.vertical_lines:
+        return (valid, normals, centroids, tilt_var) + no_lines
+    line, n1, n2 = _lines(cov[~good], w[~good], cfg)
+    rows = sel[~good][line]
+    valid[rows] = True
+    normals[rows] = n1
+    centroids[rows] = c[~good][line]
+    wl = w[~good][line]
+    tilt_var[rows] = np.maximum(wl[:, 1], 0.0) / (k * np.maximum(wl[:, 2], 1e-12))
+    return valid, normals, centroids, tilt_var, rows, n2
+
+
+def _lines(cov: np.ndarray, w: np.ndarray, cfg: PlaneRefinementConfig
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which of the neighbourhoods (covariances ``cov`` (m, 3, 3), ascending eigenvalues ``w``)
+    are near-vertical lines (``min_linearity``, ``max_line_tilt_deg``; odometry frame, z up),
+    and two unit normals of each: horizontal-ish, orthogonal to each other and to the line.
+
+    A thin pole, trunk or mast seen from a distance fills no plane, but its points hold a
+    scan point across the pole: the point-to-line offset is the two point-to-plane residuals
+    on planes through the line with those normals."""
+    linearity = (w[:, 2] - w[:, 1]) / np.maximum(w[:, 2], 1e-12)
+    cand = np.flatnonzero(linearity >= cfg.min_linearity)
+    empty = np.zeros(0, dtype=int), np.zeros((0, 3)), np.zeros((0, 3))
+    if not len(cand):
+        return empty
+    d = eigenvector3(cov[cand], w[cand, 2])
+    vertical = np.abs(d[:, 2]) >= np.cos(np.deg2rad(cfg.max_line_tilt_deg))
+    cand, d = cand[vertical], d[vertical]
+    if not len(cand):
+        return empty
+    n1 = np.cross(d, np.eye(3)[np.argmin(np.abs(d), axis=1)])  # the axis farthest from d
+    n1 /= np.linalg.norm(n1, axis=1, keepdims=True)
+    return cand, n1, np.cross(d, n1)
 
 
 @dataclass
@@ -271,7 +327,8 @@ class PlaneFits:
 
     Attributes:
         pose: 4x4 ``T_odom_lidar`` at which the points were associated.
-        points: (N, 3) the scan points used (thinned to ``points``), LiDAR frame [m].
+        points: (N, 3) the scan points used (thinned to ``points``; a point on a vertical
+            line once more at the end, for the line's second plane), LiDAR frame [m].
         valid: (N,) a plane was fitted for the point.
         normals, centroids: (N, 3) plane normals and centroids, odometry frame [m].
         tilt_var: (N,) variance of the fitted normal's tilt [rad^2].
@@ -298,7 +355,9 @@ class PlaneFits:
 def fit_planes(points: np.ndarray, reference: ReferenceMap, pose: np.ndarray,
                config: PlaneRefinementConfig | None = None) -> PlaneFits:
     """Thin the scan to ``config.points``, place it at ``pose`` and fit a local-map plane to
-    each point's ``normal_neighbors`` nearest map points (one k-d tree query)."""
+    each point's ``normal_neighbors`` nearest map points (one k-d tree query); a point whose
+    neighbours form a vertical line (``config.vertical_lines``) gets the line's two planes,
+    the second as an extra row."""
     cfg = config or PlaneRefinementConfig()
     pose = geometry.orthonormalize(np.asarray(pose, dtype=float))
     pts = geometry.drop_nonfinite_rows(np.asarray(points, dtype=float).reshape(-1, 3))
@@ -308,8 +367,13 @@ def fit_planes(points: np.ndarray, reference: ReferenceMap, pose: np.ndarray,
         return PlaneFits(pose, pts, np.zeros(len(pts), bool), none, none.copy(),
                          np.zeros(len(pts)))
     q = pts @ pose[:3, :3].T + pose[:3, 3]
-    valid, normals, centroids, tilt_var = _planes(reference, q, cfg.normal_neighbors,
-                                                  cfg.max_neighbor_distance, cfg.min_planarity)
+    valid, normals, centroids, tilt_var, line, n2 = _planes(reference, q, cfg)
+    if len(line):  # a point on a line: a second row with the line's second plane
+        pts = np.vstack([pts, pts[line]])
+        valid = np.concatenate([valid, np.ones(len(line), bool)])
+        normals = np.vstack([normals, n2])
+        centroids = np.vstack([centroids, centroids[line]])
+        tilt_var = np.concatenate([tilt_var, tilt_var[line]])
     return PlaneFits(pose, pts, valid, normals, centroids, tilt_var)
 
 
