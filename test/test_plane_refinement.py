@@ -423,10 +423,10 @@ def test_vertical_lines_hold_open_ground_across_the_poles(axis):
     truth = pose_at(0.0)
     start = truth.copy()
     start[:3, 3] += 0.1 * axis[0, :3]  # 10 cm off across the poles
-    cfg = PlaneRefinementConfig(points=20000)
-    with_lines = refine_in_subspace(scan, ref, start, axis, 1.0, cfg)
+    with_lines = refine_in_subspace(scan, ref, start, axis, 1.0,
+                                    PlaneRefinementConfig(points=20000, vertical_lines=True))
     planes_only = refine_in_subspace(scan, ref, start, axis, 1.0,
-                                     PlaneRefinementConfig(points=20000, vertical_lines=False))
+                                     PlaneRefinementConfig(points=20000))
     assert with_lines.ok and with_lines.information[0, 0] > 1000.0
     assert np.linalg.norm(with_lines.pose[:3, 3] - truth[:3, 3]) < 0.02
     # the ground's normals say nothing across the poles, the few planar patches of the
@@ -445,11 +445,13 @@ def test_only_near_vertical_lines_are_used(tilt_deg, used):
     lines = np.vstack([np.array([4.0, y, 2.0]) + t[:, None] * u for y in (-3.0, 3.0)])
     ref = ReferenceMap.from_points(lines, 1.0, 200)
     scan = lines[10:-10:3] - [0.0, 0.0, 1.5]  # sensor frame at pose_at(0)
-    fits = fit_planes(scan, ref, pose_at(0.0), PlaneRefinementConfig(points=20000))
+    fits = fit_planes(scan, ref, pose_at(0.0),
+                      PlaneRefinementConfig(points=20000, vertical_lines=True))
     if not used:
         assert not fits.valid.any() and len(fits.points) == len(scan)
         return
     assert fits.valid.all() and len(fits.points) == 2 * len(scan)  # two planes per point
+    assert not fit_planes(scan, ref, pose_at(0.0), PlaneRefinementConfig(points=20000)).valid.any()
     n = len(scan)
     normals = fits.normals
     assert np.allclose(np.abs(normals @ u), 0.0, atol=0.05)  # both across the line

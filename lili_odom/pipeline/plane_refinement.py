@@ -11,7 +11,10 @@ put. This module measures what the LiDAR does know along the detected subspace:
    remapping, :mod:`lili_odom.pipeline.remap`);
 2. associate each scan point with its ``normal_neighbors`` nearest local-map points (scipy
    ``cKDTree`` of the map KISS-ICP keeps), fit a plane to them by PCA (normal = eigenvector of
-   the smallest eigenvalue) and form the point-to-plane residual ``r = n . (T p - c)``;
+   the smallest eigenvalue) and form the point-to-plane residual ``r = n . (T p - c)``; where
+   the neighbours form a near-vertical line instead (a pole, a trunk) and ``vertical_lines``
+   is on, the point gets two residuals on planes through the line, one per direction across
+   it;
 3. take a few damped Gauss-Newton steps on those planes in the subspace coordinates ``c``
    only (``T exp(S^-1 B^T c)``); the other components stay at the registration's optimum;
 4. report the Gauss-Newton information of the subspace coordinates at the result,
@@ -105,7 +108,9 @@ class PlaneRefinementConfig:
             ``min_along_information``; default True.
         vertical_lines: a neighbourhood that is not planar but a near-vertical line (a pole,
             a trunk, a mast, a door's edge) is used too, as two planes through the line: it
-            holds the point across the line, horizontally (``_lines``). Default True.
+            holds the point across the line, horizontally (``_lines``). Default False: the
+            line through the neighbours' centroid lies on the side of a pole earlier scans
+            saw, up to its radius off the side this scan sees.
         min_linearity: neighbourhoods with ``(l1 - l2) / l1`` at least this are lines
             (dimensionless); default 0.8.
         max_line_tilt_deg: lines tilted from the vertical by more than this are not used
@@ -133,7 +138,7 @@ class PlaneRefinementConfig:
     clear_information: float = 2500.0
     refine_constrained: str = "planar"
     predicted_start: bool = True
-    vertical_lines: bool = True
+    vertical_lines: bool = False
     min_linearity: float = 0.8
     max_line_tilt_deg: float = 20.0
 
