@@ -107,8 +107,8 @@ class PlaneRefinementConfig:
             better and they hold every direction of the subspace to
             ``min_along_information``; default True.
         vertical_lines: a neighbourhood that is not planar but a near-vertical line (a pole,
-            a trunk, a mast, a door's edge) is used too, as two planes through the line: it
-            holds the point across the line, horizontally (``_lines``). Default False: the
+            a trunk, a thin mast) is used too, as two planes through the line: it holds the
+            point across the line, horizontally (``_lines``). Default False: the
             line through the neighbours' centroid lies on the side of a pole earlier scans
             saw, up to its radius off the side this scan sees.
         min_linearity: neighbourhoods with ``(l1 - l2) / l1`` at least this are lines
