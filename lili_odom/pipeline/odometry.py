@@ -100,11 +100,9 @@ class PipelineConfig:
         plane_refinement: the point-to-plane refinement inside a detected subspace whose
             information the fusion keeps (``fusion.lidar.subspace_information``).
         scan_matcher / fusion / lili / zhang / hessian: the stages' own configurations; in
-            the odometry LiLi perturbs each axis in one sign (``lili.both_signs`` False: 6
-            re-registrations per detection) and stops a perturbed re-registration once it
-            has come back (``lili.return_ratio`` 0.1), while the standalone detector
-            (``lili-odom detect``) perturbs in both signs and runs each to convergence, as
-            the paper.
+            the odometry LiLi stops a perturbed re-registration once it has come back
+            (``lili.return_ratio`` 0.1), the standalone detector (``lili-odom detect``) runs
+            each to convergence.
     """
 
     method: str = "lili"
@@ -121,8 +119,7 @@ class PipelineConfig:
     plane_refinement: PlaneRefinementConfig = field(default_factory=PlaneRefinementConfig)
     scan_matcher: ScanMatcherConfig = field(default_factory=ScanMatcherConfig)
     fusion: FusionConfig = field(default_factory=FusionConfig)
-    lili: LiliConfig = field(
-        default_factory=lambda: LiliConfig(return_ratio=0.1, both_signs=False))
+    lili: LiliConfig = field(default_factory=lambda: LiliConfig(return_ratio=0.1))
     zhang: ZhangConfig = field(default_factory=ZhangConfig)
     hessian: HessianConfig = field(default_factory=HessianConfig)
 
