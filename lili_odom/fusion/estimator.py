@@ -710,12 +710,15 @@ class FusionEstimator:
         Without a degenerate subspace, the registration. With one, the subspace-refined
         registration when the LiDAR's information (kept part plus subspace factor) holds the
         wheels' direction of travel to ``wheel_scale.max_lidar_sigma`` (marginal 1-sigma
-        along it); else None (the registration's components along the subspace are the
-        wheels' own prediction).
+        along it; ``max_lidar_sigma_start`` until the scale is established); else None (the
+        registration's components along the subspace are the wheels' own prediction).
         """
         if not len(basis):
             return T_meas
-        limit = self.config.wheel_scale.max_lidar_sigma
+        cfg = self.config.wheel_scale
+        limit = cfg.max_lidar_sigma
+        if cfg.max_lidar_sigma_start > 0 and not self.wheel_scale.established:
+            limit = cfg.max_lidar_sigma_start
         if sub_pose is None or sub_info is None or lidar_info is None or not limit > 0:
             return None
         d = np.asarray(wheel, dtype=float)[:3, 3]

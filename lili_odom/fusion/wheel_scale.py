@@ -96,6 +96,8 @@ class WheelScaleConfig:
             chained when the LiDAR (the kept information plus its own information inside the
             subspace) holds the wheels' direction of travel to this 1-sigma [m]; 0 = only
             fully constrained registrations are chained. Default 0.03.
+        max_lidar_sigma_start: the same limit until the estimate is established
+            (``min_distance_m`` of accepted travel) [m]; 0 = ``max_lidar_sigma``. Default 0.
     """
 
     enabled: bool = True
@@ -114,6 +116,7 @@ class WheelScaleConfig:
     slip_piece_m: float = 1.0
     slip_piece_ratio: float = 0.08
     max_lidar_sigma: float = 0.03
+    max_lidar_sigma_start: float = 0.0
 
     def validate(self, prefix: str = "wheel_scale.") -> None:
         from lili_odom.errors import check_range
@@ -135,6 +138,8 @@ class WheelScaleConfig:
                     unit="m")
         check_range(prefix + "slip_piece_ratio", self.slip_piece_ratio, 0.0, 10.0)
         check_range(prefix + "max_lidar_sigma", self.max_lidar_sigma, 0.0, 10.0, unit="m")
+        check_range(prefix + "max_lidar_sigma_start", self.max_lidar_sigma_start, 0.0, 10.0,
+                    unit="m")
 
 
 class _Segment:
