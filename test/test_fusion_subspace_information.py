@@ -104,8 +104,9 @@ def test_wheel_scale_does_not_learn_from_the_wheels_own_prediction():
 
 def test_a_looser_limit_until_the_wheel_scale_is_established():
     # held to about 4.5 cm along the direction of travel: above the 3 cm limit, within 5 cm
-    assert drive_degenerate(500.0, 20.0).wheel_scale.scale == 1.0
-    start = drive_degenerate(500.0, 20.0, config=WheelScaleConfig(max_lidar_sigma_start=0.05))
+    off = drive_degenerate(500.0, 20.0, config=WheelScaleConfig(max_lidar_sigma_start=0.0))
+    assert off.wheel_scale.scale == 1.0
+    start = drive_degenerate(500.0, 20.0)  # the default: 5 cm until established
     assert start.wheel_scale.established
     assert start.wheel_scale.scale == pytest.approx(1.03, rel=0.01)
     # once established the 3 cm limit applies again: no more travel is chained

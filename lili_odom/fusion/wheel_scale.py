@@ -97,7 +97,9 @@ class WheelScaleConfig:
             subspace) holds the wheels' direction of travel to this 1-sigma [m]; 0 = only
             fully constrained registrations are chained. Default 0.03.
         max_lidar_sigma_start: the same limit until the estimate is established
-            (``min_distance_m`` of accepted travel) [m]; 0 = ``max_lidar_sigma``. Default 0.
+            (``min_distance_m`` of accepted travel) [m]; 0 = ``max_lidar_sigma``. Default
+            0.05: on open ground few registrations hold the direction of travel to 3 cm, and
+            the first segments would form only after tens of metres.
     """
 
     enabled: bool = True
@@ -116,7 +118,7 @@ class WheelScaleConfig:
     slip_piece_m: float = 1.0
     slip_piece_ratio: float = 0.08
     max_lidar_sigma: float = 0.03
-    max_lidar_sigma_start: float = 0.0
+    max_lidar_sigma_start: float = 0.05
 
     def validate(self, prefix: str = "wheel_scale.") -> None:
         from lili_odom.errors import check_range
