@@ -717,7 +717,7 @@ class FusionEstimator:
             return T_meas
         cfg = self.config.wheel_scale
         limit = cfg.max_lidar_sigma
-        if cfg.max_lidar_sigma_start > 0 and not self.wheel_scale.established:
+        if limit > 0 and cfg.max_lidar_sigma_start > 0 and not self.wheel_scale.established:
             limit = cfg.max_lidar_sigma_start
         if sub_pose is None or sub_info is None or lidar_info is None or not limit > 0:
             return None

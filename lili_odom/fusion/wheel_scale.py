@@ -97,7 +97,8 @@ class WheelScaleConfig:
             subspace) holds the wheels' direction of travel to this 1-sigma [m]; 0 = only
             fully constrained registrations are chained. Default 0.03.
         max_lidar_sigma_start: the same limit until the estimate is established
-            (``min_distance_m`` of accepted travel) [m]; 0 = ``max_lidar_sigma``. Default
+            (``min_distance_m`` of accepted travel) [m], when ``max_lidar_sigma`` is not 0;
+            0 = ``max_lidar_sigma``. Default
             0.05: on open ground few registrations hold the direction of travel to 3 cm, and
             the first segments would form only after tens of metres.
     """
