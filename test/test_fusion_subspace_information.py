@@ -109,5 +109,5 @@ def test_a_looser_limit_until_the_wheel_scale_is_established():
     start = drive_degenerate(500.0, 20.0)  # the default: 5 cm until established
     assert start.wheel_scale.established
     assert start.wheel_scale.scale == pytest.approx(1.03, rel=0.01)
-    # once established the 3 cm limit applies again: no more travel is chained
+    # once established the 3 cm limit applies again: the rest of the 20 m is not chained
     assert start.wheel_scale.lidar_m < 15.0

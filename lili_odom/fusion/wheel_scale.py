@@ -14,8 +14,9 @@ by it before the increment enters the graph.
 Which registrations count: fully constrained ones, and those with a degenerate subspace whose
 LiDAR information (what the registration keeps plus the LiDAR's own information inside the
 subspace, :mod:`lili_odom.pipeline.plane_refinement`) still holds the direction of travel to
-``max_lidar_sigma``; the latter are compared through the pose refined inside the subspace,
-never through the registration held at the wheels' prediction there.
+``max_lidar_sigma`` (``max_lidar_sigma_start`` until the estimate is established); the
+latter are compared through the pose refined inside the subspace, never through the
+registration held at the wheels' prediction there.
 
 The LiDAR side is not compared increment by increment: a registration is a few centimetres
 off along a weakly constrained axis, which at 10 cm per scan makes single-increment ratios
@@ -98,9 +99,9 @@ class WheelScaleConfig:
             fully constrained registrations are chained. Default 0.03.
         max_lidar_sigma_start: the same limit until the estimate is established
             (``min_distance_m`` of accepted travel) [m], when ``max_lidar_sigma`` is not 0;
-            0 = ``max_lidar_sigma``. Default
-            0.05: on open ground few registrations hold the direction of travel to 3 cm, and
-            the first segments would form only after tens of metres.
+            0 = ``max_lidar_sigma``. Default 0.05: on open ground few registrations hold the
+            direction of travel to 3 cm, and the first segments would form only after tens
+            of metres.
     """
 
     enabled: bool = True
