@@ -27,13 +27,10 @@ import numpy as np
 
 from benchmarks._common import RESULTS, ROOT
 from lili_odom.config import load_config
+from lili_odom.evaluation.comparison import run_label
 from lili_odom.evaluation.runner import run_bag
 
 DEFAULT_OUT = RESULTS / "fusion_generalisation"
-
-
-def _label(config: str) -> str:
-    return "default" if config == "default" else Path(config).stem
 
 
 def _sidecar(bag: Path) -> dict:
@@ -124,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         entry["bag"] = bag.name
         entry["true_wheel_scale"] = _sidecar(bag).get("wheel_scale")
         for config in args.configs:
-            label = _label(config)
+            label = run_label(config)
             print(f"{name}: lili {label} ...", flush=True)
             entry[label] = run_ours(bag, config, args.runs / f"{name}_{label}",
                                     args.reuse, args.start_m)
