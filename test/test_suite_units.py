@@ -14,6 +14,7 @@ from lili_odom.suite.frames import lidar_to_base
 from lili_odom.suite.jobs import ROW_KEYS, BagSpec, Job, execute
 from lili_odom.suite.report import SuiteFile, markdown, validate_row
 from lili_odom.suite.scoring import score
+from lili_odom.suite.standings import markdown_lines, standings
 
 
 def _base_trajectory(n: int = 50) -> np.ndarray:
@@ -133,8 +134,8 @@ def test_a_missing_bag_gives_a_failure_row_through_the_local_backend(tmp_path):
     assert (tmp_path / "runs" / "wheels" / "log.txt").exists()
 
 
-def _row(scenario, method, ate, split="tuning", error=None):
-    row = {"scenario": scenario, "split": split, "kind": "tunnel", "seed": 0, "method": method,
+def _row(scenario, method, ate, split="tuning", error=None, seed=0):
+    row = {"scenario": scenario, "split": split, "kind": "tunnel", "seed": seed, "method": method,
            "ate_m": ate, "rpe_pct": 1.0, "final_m": 0.5, "distance_m": 20.0, "scans_per_s": 10.0,
            "degenerate_fraction": None, "scans": 100, "wall_s": 10.0}
     if error:
@@ -174,6 +175,36 @@ def test_markdown_reports_splits_apart_and_bolds_the_best(tmp_path):
     assert v_table.index("| **none** | 0.300") < v_table.index("| lili | 0.500")
     assert "1 failed: crashed" in md
     assert "`lili-odom suite --preset ci`" in md
+
+
+def test_standings_compare_with_the_best_lidar_peer_and_the_floors():
+    rows = [_row("a", "lili", 0.05, seed=1), _row("a", "genz", 0.06, seed=1),
+            _row("a", "kiss", 0.04, seed=1, error="crashed"), _row("a", "wheels", 0.5, seed=1),
+            _row("a", "none", 0.03, seed=1),
+            _row("a", "lili", 0.2, seed=2), _row("a", "rko", 0.1, seed=2), _row("a", "kiss", 0.3, seed=2),
+            _row("b", "lili", None, seed=0, error="crashed"), _row("b", "genz", 1.0, seed=0),
+            _row("c", "genz", 1.0, seed=0)]  # no lili row: no standing
+    first, second, failed = standings(rows)
+    assert (first.best_peer, first.best_peer_ate_m) == ("genz", 0.06)  # the failed kiss is not best
+    assert first.ahead_of_peers and not first.ahead_of_floors  # none is better
+    assert first.share_pct == pytest.approx(0.25)
+    assert (second.best_peer, second.ahead_of_peers, second.ahead_of_floors) == ("rko", False, True)
+    assert not failed.ahead_of_peers and not failed.ahead_of_floors and failed.share_pct is None
+    lines = markdown_lines([first, second, failed], max_share_pct=0.5)
+    assert lines[-1].startswith("`lili` is ahead of the best LiDAR peer on 1 of 3 runs, within 0.5 % "
+                                "of the distance on 1 of 3 and ahead of wheel odometry alone and "
+                                "`none` on 1 of 3")
+    assert "| a | 2 | 20.0 | 0.200 | rko 0.100 | 2.00 | 1.00 | – | **no** | **no** | yes |" in lines
+
+
+def test_markdown_lists_every_run_and_where_lili_stands():
+    rows = [_row("v", "lili", 0.02, split="validation", seed=s) for s in (1, 2)]
+    rows += [_row("v", "genz", 0.03, split="validation", seed=1),
+             _row("v", "genz", 0.01, split="validation", seed=2)]
+    md = markdown({"rows": rows, "scenarios": {"v": {"split": "validation"}}})
+    assert "| v | 20.0 | **0.020** | **0.020** |" in md  # the mean over the seeds
+    assert "| v | 2 | 20.0 | 0.020 | **0.010** |" in md
+    assert "ahead of the best LiDAR peer on 1 of 2 runs" in md
 
 
 def test_a_hanging_job_is_stopped_and_reported(tmp_path):

@@ -10,7 +10,9 @@ scenario.
                "error"?}, ...]}
 
 ``suite.md``: the command, then a summary table per split (ATE [m] of every method per
-scenario; ``validation`` reported apart from ``tuning``, users' bags under ``user``), then one
+scenario; ``validation`` reported apart from ``tuning``, users' bags under ``user``), with
+every run's ATE when a scenario has several seeds and where ``lili`` stands against the
+LiDAR peers and the floors (:mod:`lili_odom.suite.standings`), then one
 table per scenario (methods sorted by ATE, the best in bold; mean over seeds when there are
 several) with its figure ``NAME.png`` (top view of the truth and every method's trajectory
 after the same SE(3) alignment as the ATE, first seed).
@@ -26,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from lili_odom.suite.jobs import ROW_KEYS
+from lili_odom.suite.standings import LIDAR_PEERS, markdown_lines, standings
 
 SPLIT_ORDER = ("tuning", "validation", "user")
 
@@ -171,6 +174,12 @@ def markdown(document: dict) -> str:
             cells = [(f"**{_fmt(v)}**" if v is not None and v == best else _fmt(v)) for v in vals.values()]
             lines.append(f"| {n} | {_fmt(dist, 1)} | " + " | ".join(cells) + " |")
         lines.append("")
+        in_rows = [r for r in rows if split_of[r["scenario"]] == split]
+        if len({(r["scenario"], r["seed"]) for r in in_rows}) > len(in_split):
+            lines += [f"### Every run ({split}): ATE [m]", ""] + _per_run_lines(in_rows, order) + [""]
+        placed = standings(in_rows, "lili")
+        if placed and any(r["method"] in LIDAR_PEERS for r in in_rows):
+            lines += [f"### Where `lili` stands ({split})", ""] + markdown_lines(placed) + [""]
     lines += ["## Scenarios", ""]
     for n in names:
         info = scenarios.get(n, {})
@@ -193,6 +202,24 @@ def markdown(document: dict) -> str:
                          f"{_fmt(a['degenerate_fraction'], 2)} | {seeds} |")
         lines += ["", f"![{n}]({n}.png)", ""]
     return "\n".join(lines) + "\n"
+
+
+def _per_run_lines(rows: list[dict], order: list[str]) -> list[str]:
+    """A Markdown table of every run's (scenario, seed) ATE [m] per method, the best in bold."""
+    runs: dict[tuple[str, int], dict[str, dict]] = {}
+    for r in rows:
+        runs.setdefault((r["scenario"], r["seed"]), {})[r["method"]] = r
+    lines = ["| scenario | seed | distance [m] | " + " | ".join(order) + " |",
+             "|---|---:|---:|" + "---:|" * len(order)]
+    for (name, seed), by_method in runs.items():
+        vals = [None if by_method.get(m) is None or by_method[m].get("error")
+                else by_method[m].get("ate_m") for m in order]
+        ok = [v for v in vals if v is not None]
+        best = min(ok) if ok else None
+        dist = _mean([r.get("distance_m") for r in by_method.values()])
+        cells = [(f"**{_fmt(v)}**" if v is not None and v == best else _fmt(v)) for v in vals]
+        lines.append(f"| {name} | {seed} | {_fmt(dist, 1)} | " + " | ".join(cells) + " |")
+    return lines
 
 
 # ---------------------------------------------------------------------------- figures
