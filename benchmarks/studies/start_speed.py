@@ -1,0 +1,185 @@
+"""What LiDAR+IMU odometry started while driving needs: the speed at the start.
+
+    python -m benchmarks.studies.start_speed              # the four windows of moving_start
+    python -m benchmarks.studies.start_speed --windows parking_lot:20
+
+Without wheel odometry the fusion starts at zero velocity with a loose prior (an IMU cannot
+tell driving from rest). For each window (a suite scenario cut to start while the robot
+drives; 32x512, seed 0, 20 s, the wheel topic ignored) this runs `lili`:
+
+* with the defaults, and with the start velocity given: the truth's body velocity at the
+  first scan scaled by each ``--scales`` factor, held by the estimator's tight velocity prior
+  (``FusionEstimator.initialize(velocity=...)``, ``prior_sigma_velocity``); ATE after SE(3)
+  alignment and end-point error [m];
+* the point-to-plane cost of the first two sweeps over forward speeds 0-3 m/s (both deskewed
+  with the speed, the second placed at the speed's travel and fitted to the first one's planes:
+  ``fit_planes`` / ``plane_cost`` of :mod:`lili_odom.pipeline.plane_refinement`, the pipeline's
+  voxelisation), its minimum against the true speed: could the speed be found from the LiDAR?
+
+Writes ``benchmarks/results/<name>.{md,json}`` (default ``start_speed``).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks._common import RESULTS, config_with, machine_info, write_results
+from benchmarks._pieces import piece_bag
+
+WINDOWS = ("building:30", "parking_lot:20", "airfield:30", "long_tunnel:30")
+SPEEDS = np.round(np.arange(0.0, 3.0001, 0.1), 2)
+
+
+def _run(bag: Path, out: Path, body_velocity: np.ndarray | None = None) -> dict:
+    """`lili` without wheels over ``bag``; the start velocity given in base_link when set.
+    Returns the metrics, the truth and the first two scans."""
+    from lili_odom.evaluation.runner import run_bag
+
+    config = dataclasses.replace(config_with({"method": "lili"}, prog="start_speed"),
+                                 wheel_topic="/none")
+    captured: dict = {"scans": []}
+
+    import lili_odom.pipeline.odometry as odometry
+
+    pipeline_cls = odometry.OdometryPipeline
+    original_process = pipeline_cls.process_scan
+
+    def process_scan(self, scan):
+        if len(captured["scans"]) < 2:
+            captured["scans"].append(scan)
+            captured["matcher_config"] = self.config.scan_matcher
+            captured["T_base_lidar"] = self.T_base_lidar
+            if body_velocity is not None and not self.estimator.initialized:
+                estimator = self.estimator
+                original_init = estimator.initialize
+
+                def initialize(t, pose=None, velocity=None):
+                    out = original_init(t, pose=pose)
+                    return original_init(t, pose=out.pose,
+                                         velocity=out.pose[:3, :3] @ body_velocity)
+
+                estimator.initialize = initialize
+        return original_process(self, scan)
+
+    pipeline_cls.process_scan = process_scan
+    try:
+        run = run_bag(bag, config, out, progress=False)
+    finally:
+        pipeline_cls.process_scan = original_process
+    truth = np.loadtxt(out / "truth.tum", ndmin=2)
+    return {"metrics": run.summary["metrics"], "truth": truth, **captured}
+
+
+def _body_velocity(truth: np.ndarray, stamp: float) -> np.ndarray:
+    """Body-frame velocity [m/s] of the truth (TUM rows) around ``stamp``."""
+    from scipy.spatial.transform import Rotation
+
+    i = int(np.clip(np.searchsorted(truth[:, 0], stamp), 1, len(truth) - 1))
+    a, b = truth[i - 1], truth[i]
+    v = (b[1:4] - a[1:4]) / (b[0] - a[0])
+    return Rotation.from_quat(a[4:8]).inv().apply(v)
+
+
+def speed_costs(scans: list, matcher_config, T_base_lidar: np.ndarray,
+                speeds: np.ndarray = SPEEDS) -> list[float]:
+    """Point-to-plane cost of the second sweep on the first one's planes per forward speed."""
+    from lili_odom import geometry
+    from lili_odom.degeneracy.reference import ReferenceMap
+    from lili_odom.pipeline.plane_refinement import PlaneRefinementConfig, fit_planes, plane_cost
+    from lili_odom.pipeline.scan_matcher import ScanMatcher
+
+    matcher = ScanMatcher(matcher_config)
+    refine = PlaneRefinementConfig()
+    to_lidar = geometry.adjoint(np.linalg.inv(T_base_lidar))
+    spans = [(s.stamp + float(s.times.min()), s.stamp + float(s.times.max())) for s in scans]
+    costs = []
+    for v in speeds:
+        twist = to_lidar @ np.array([v, 0.0, 0.0, 0.0, 0.0, 0.0])
+        first, second = (matcher.preprocess(s.points, s.times, geometry.exp(twist * (b - a)))[0]
+                         for s, (a, b) in zip(scans, spans))
+        reference = ReferenceMap.from_points(first, matcher.config.voxel,
+                                             matcher.config.max_points_per_voxel)
+        pose = geometry.exp(twist * (spans[1][1] - spans[0][1]))
+        costs.append(plane_cost(fit_planes(second, reference, pose, refine), pose, refine))
+    return costs
+
+
+def study(scenario: str, start: float, scales: list[float], tmp: Path) -> dict:
+    bag = piece_bag(scenario, start, 20.0, (32, 512), 0, progress=False)
+    base = _run(bag, tmp / f"{scenario}_default")
+    first_stamp = base["scans"][0].stamp
+    v_true = _body_velocity(base["truth"], first_stamp)
+    rows = [{"start": "zero, loose (default)", "ate_m": base["metrics"]["ate_rmse_m"],
+             "final_m": base["metrics"]["final_error_m"]}]
+    for k in scales:
+        r = _run(bag, tmp / f"{scenario}_{k:g}", body_velocity=k * v_true)
+        rows.append({"start": f"{k:g} x truth", "ate_m": r["metrics"]["ate_rmse_m"],
+                     "final_m": r["metrics"]["final_error_m"]})
+        print(f"  {scenario} {k:g} x truth: ATE {rows[-1]['ate_m']:.3f} m", flush=True)
+    costs = speed_costs(base["scans"], base["matcher_config"], base["T_base_lidar"])
+    return {"window": f"{scenario} {start:g}-{start + 20:g} s", "true_speed": float(v_true[0]),
+            "runs": rows, "speeds": SPEEDS.tolist(), "costs": costs,
+            "cost_argmin": float(SPEEDS[int(np.argmin(costs))])}
+
+
+def markdown(report: dict, command: str) -> str:
+    lines = ["# The speed at a start while driving, without wheels", "",
+             f"`{command}` (`benchmarks/studies/start_speed.py`): `lili` without wheel odometry "
+             "over suite windows that start while the robot drives (32x512, seed 0, 20 s). "
+             "Start velocity: the default (zero, loose prior) or the truth's body velocity at "
+             "the first scan times a factor, held by the tight velocity prior. Speed from the "
+             "LiDAR: the forward speed at which the first two sweeps, deskewed with it, fit "
+             "each other's planes best (0-3 m/s in 0.1 m/s steps).", "",
+             f"Commit `{report['machine']['commit']}`.", "",
+             "| window | true speed [m/s] | start velocity | ATE [m] | final [m] |",
+             "|---|---:|---|---:|---:|"]
+    for w in report["windows"]:
+        for r in w["runs"]:
+            lines.append(f"| {w['window']} | {w['true_speed']:.2f} | {r['start']} | "
+                         f"{r['ate_m']:.3f} | {r['final_m']:.3f} |")
+    lines += ["", "| window | true speed [m/s] | two-sweep cost minimum [m/s] | cost at 0 / "
+              "minimum / at 3 m/s |", "|---|---:|---:|---|"]
+    for w in report["windows"]:
+        c = w["costs"]
+        lines.append(f"| {w['window']} | {w['true_speed']:.2f} | {w['cost_argmin']:.1f} | "
+                     f"{c[0]:.4f} / {min(c):.4f} / {c[-1]:.4f} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--windows", nargs="+", default=list(WINDOWS), metavar="SCENARIO:START",
+                    help="suite windows (scenario and start [s]); default the four of "
+                         "benchmarks.moving_start")
+    ap.add_argument("--scales", nargs="+", type=float, default=[0.9, 1.0, 1.1],
+                    help="factors on the true start velocity (default 0.9 1.0 1.1)")
+    ap.add_argument("--out", default=RESULTS)
+    ap.add_argument("--name", default="start_speed")
+    args = ap.parse_args(argv)
+    windows = []
+    for text in args.windows:
+        name, _, start = text.partition(":")
+        try:
+            windows.append((name, float(start or 0.0)))
+        except ValueError:
+            ap.error(f"--windows: {text!r} is not SCENARIO:START")
+    report = {"machine": machine_info(), "windows": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, start in windows:
+            print(f"{name} from {start:g} s", flush=True)
+            report["windows"].append(study(name, start, args.scales, Path(tmp)))
+    command = ("python -m benchmarks.studies.start_speed"
+               + (f" --windows {' '.join(args.windows)}" if args.windows != list(WINDOWS) else "")
+               + (f" --scales {' '.join(f'{s:g}' for s in args.scales)}"
+                  if args.scales != [0.9, 1.0, 1.1] else "")
+               + (f" --name {args.name}" if args.name != "start_speed" else ""))
+    print(f"wrote {write_results(args.out, args.name, markdown(report, command), report)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
