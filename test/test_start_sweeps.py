@@ -102,16 +102,20 @@ def _room(rng: np.random.Generator) -> np.ndarray:
     return room[rng.permutation(len(room))]
 
 
-def _drive(redeskew: bool, speed: float = 2.5, scans: int = 12) -> tuple[np.ndarray, int]:
+def _drive(redeskew: bool, speed: float = 2.5, scans: int = 12, start_speed: bool = False,
+           room: np.ndarray | None = None, counters: dict | None = None
+           ) -> tuple[np.ndarray, int]:
     """A LiDAR driving through a box room at ``speed`` from before its first sweep, with a
     steady IMU (constant speed looks like rest to it) and no wheels: the position error of
-    every scan [m] and how often the map was rebuilt."""
+    every scan [m] and how often the map was rebuilt (``start_speed``: the speed searched
+    from the first two sweeps, :mod:`lili_odom.pipeline.start_speed`)."""
     from lili_odom.pipeline.odometry import OdometryPipeline, PipelineConfig
     from lili_odom.pipeline.types import ImuSample, Scan
 
-    room = _room(np.random.default_rng(0))
+    room = _room(np.random.default_rng(0)) if room is None else room
     t = np.linspace(0.0, SWEEP, len(room))
     cfg = PipelineConfig(redeskew_start=redeskew)
+    cfg.start_speed.enabled = start_speed
     cfg.detection_schedule.background = False
     p = OdometryPipeline(cfg)
     T_bl = p.T_base_lidar
@@ -129,6 +133,8 @@ def _drive(redeskew: bool, speed: float = 2.5, scans: int = 12) -> tuple[np.ndar
         true_lidar[0, 3] = speed * SWEEP * k  # LiDAR motion since the first sweep's end
         est_lidar = np.linalg.inv(T_bl) @ out.pose @ T_bl
         errors.append(np.linalg.norm(est_lidar[:3, 3] - true_lidar[:3, 3]))
+    if counters is not None:
+        counters.update(p.counters)
     return np.array(errors), p.counters["start_map_rebuilt"]
 
 

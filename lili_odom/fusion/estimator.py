@@ -302,7 +302,8 @@ class FusionEstimator:
         return gtsam.ISAM2(p)
 
     def initialize(
-        self, t: float, pose: np.ndarray | None = None, velocity: np.ndarray | None = None
+        self, t: float, pose: np.ndarray | None = None, velocity: np.ndarray | None = None,
+        velocity_sigma: float | None = None,
     ) -> FusionOutput:
         """Create the first state at stamp ``t`` [s].
 
@@ -312,6 +313,8 @@ class FusionEstimator:
             velocity: (3,) initial velocity in the odometry frame [m/s]. None: from the wheel
                 odometry just before ``t`` when the robot is moving, else zero (tight prior if
                 the wheels report rest and the IMU agrees, loose otherwise).
+            velocity_sigma: sigma of the prior on a given ``velocity`` [m/s]; None:
+                ``prior_sigma_velocity``.
 
         Raises:
             ValueError: non-finite ``t``, invalid ``pose`` or ``velocity``.
@@ -358,7 +361,9 @@ class FusionEstimator:
             v0 = np.asarray(velocity, dtype=float).reshape(3)
             if not finite(v0):
                 raise ValueError("initial velocity must be finite")
-            sigma_v = cfg.prior_sigma_velocity
+            sigma_v = cfg.prior_sigma_velocity if velocity_sigma is None else float(velocity_sigma)
+            if not (math.isfinite(sigma_v) and sigma_v > 0):
+                raise ValueError("initial velocity sigma must be finite and positive")
         bias0 = gtsam.imuBias.ConstantBias(np.zeros(3), gyro_bias)
 
         graph = gtsam.NonlinearFactorGraph()

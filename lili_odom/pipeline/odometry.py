@@ -57,6 +57,7 @@ from lili_odom.pipeline.plane_refinement import (PlaneFitCache, PlaneRefinement,
                                                  refine_in_subspace)
 from lili_odom.pipeline.remap import constrained_registration
 from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig, deskew_motion
+from lili_odom.pipeline.start_speed import StartSpeedConfig, forward_speed
 from lili_odom.pipeline.start_sweeps import StartSweep, StartSweeps
 from lili_odom.pipeline.types import ImuSample, OdometryOutput, Scan, WheelSample
 from lili_odom.pipeline.validation import checked_scan
@@ -90,6 +91,8 @@ class PipelineConfig:
             those whose motion by the fused twist differs from the one they were deskewed
             with, and rebuild the map from them (a start while moving:
             :mod:`lili_odom.pipeline.start_sweeps`). Default True.
+        start_speed: without wheel odometry, find the speed of a start while driving from the
+            first two sweeps (:mod:`lili_odom.pipeline.start_speed`).
         remap_iterations: on a degenerate scan with wheel data, the registration is re-run
             held at the wheel prediction along the degenerate subspace (solution remapping,
             :mod:`lili_odom.pipeline.remap`) for at most this many single ICP iterations, and
@@ -114,6 +117,7 @@ class PipelineConfig:
     sensor_wait_s: float = 0.3
     max_pending_scans: int = 3
     redeskew_start: bool = True
+    start_speed: StartSpeedConfig = field(default_factory=StartSpeedConfig)
     remap_iterations: int = 10
     detection_schedule: DetectionScheduleConfig = field(default_factory=DetectionScheduleConfig)
     plane_refinement: PlaneRefinementConfig = field(default_factory=PlaneRefinementConfig)
@@ -142,6 +146,7 @@ class PipelineConfig:
             raise ValueError(f"remap_iterations must be in [0, 100], got {self.remap_iterations}")
         self.detection_schedule.validate()
         self.plane_refinement.validate()
+        self.start_speed.validate()
         self.scan_matcher.validate()
         self.lili.validate()
 
@@ -216,6 +221,7 @@ class OdometryPipeline:
         self._detection_seq = 0
         self._matcher = ScanMatcher(self.config.scan_matcher)
         self._start_sweeps = StartSweeps()
+        self._first_sweep: StartSweep | None = None  # a new start's first sweep, raw
         self._new_estimator()
         self._last_stamp: float | None = None
         self._last_output: OdometryOutput | None = None
@@ -271,6 +277,7 @@ class OdometryPipeline:
                 self.estimator.add_wheel(t, T)
         self._last_stamp = None
         self._last_output = None
+        self._first_sweep = None
         if count:
             self.counters["resets"] += 1
 
@@ -356,6 +363,8 @@ class OdometryPipeline:
         first = not est.initialized
         t0 = time.perf_counter()
         T_bl = self.T_base_lidar
+        if not first and self._first_sweep is not None:
+            self._find_start_speed(StartSweep(points, times, np.eye(4), np.eye(4), t_first, t_ref))
         if first and reinit_pose is not None:
             sweep_motion = np.eye(4)
             guess = reinit_pose @ T_bl
@@ -472,6 +481,11 @@ class OdometryPipeline:
         map_was_empty = self._matcher.map_empty
         inserted = self._matcher.update_map(map_points, fused_lidar,
                                             np.linalg.inv(guess) @ fused_lidar)
+        self._first_sweep = None
+        if (first and reinit_pose is None and map_was_empty and self.config.start_speed.enabled
+                and self.config.scan_matcher.deskew):
+            self._first_sweep = StartSweep(points, times, deskew_motion(sweep_motion), inserted,
+                                           t_first, t_ref)
         self._start_worker()
         if self._worker is not None and self._worker.alive:
             self._worker.update_map(map_points, inserted)
@@ -542,6 +556,44 @@ class OdometryPipeline:
     def _map_parameters(self) -> tuple[float, float, int]:
         c = self.config.scan_matcher
         return c.voxel, c.max_range, c.max_points_per_voxel
+
+    def _find_start_speed(self, second: StartSweep) -> None:
+        """At the second scan of a start whose speed is unknown (no wheel odometry), find the
+        forward speed from the first two sweeps; when found, restart the fusion at the first
+        scan with it and rebuild the map from the first sweep deskewed with it."""
+        first, self._first_sweep = self._first_sweep, None
+        cfg = self.config.start_speed
+        est = self.estimator
+        sigma = est.velocity_sigma()
+        if sigma is None or sigma <= cfg.unknown_sigma or self._last_output is None:
+            return
+        samples = est.imu.samples(first.t_first, second.t_last)
+        rate = (est.T_base_imu[:3, :3] @ np.mean([s.gyro for s in samples], axis=0)
+                if samples else np.zeros(3))
+        try:
+            found = forward_speed(first, second, self._matcher, self.T_base_lidar, rate, cfg,
+                                  self.config.plane_refinement)
+        except (RuntimeError, ValueError) as exc:
+            self._warn.warning("start_speed", "start speed not searched: %s", exc)
+            return
+        if found.speed is None:
+            self.counters["start_speed_unknown"] += 1
+            log.info("start speed not found from the first two sweeps (cost rise %.3f)",
+                     found.rise)
+            return
+        self.counters["start_speed_found"] += 1
+        log.info("start speed %.2f m/s forward, from the first two sweeps",
+                 found.speed)
+        T0 = self._last_output.pose
+        body = np.concatenate([[found.speed, 0.0, 0.0], rate])
+        est.initialize(first.t_last, pose=T0, velocity=T0[:3, :3] @ body[:3],
+                       velocity_sigma=cfg.velocity_sigma)
+        twist = geometry.adjoint(np.linalg.inv(self.T_base_lidar)) @ body
+        sweep = StartSweep(first.points, first.times,
+                           geometry.exp(twist * (first.t_last - first.t_first)), first.pose,
+                           first.t_first, first.t_last)
+        self._rebuild_map([sweep])
+        self._start_sweeps.replace(sweep)
 
     def _rebuild_map(self, sweeps: list[StartSweep]) -> None:
         """Replace the local map (and the background detector's mirror) by ``sweeps``

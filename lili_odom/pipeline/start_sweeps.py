@@ -82,6 +82,12 @@ class StartSweeps:
         """The next sweep added to the same map completes the kept ones (its twist is used)."""
         return self._sweeps is not None and len(self._sweeps) == self.count - 1
 
+    def replace(self, sweep: StartSweep) -> None:
+        """Keep ``sweep`` instead of the kept one that ends at the same stamp (the caller
+        deskewed it again and rebuilt the map from it)."""
+        if self._sweeps is not None:
+            self._sweeps = [sweep if s.t_last == sweep.t_last else s for s in self._sweeps]
+
     def add(self, sweep: StartSweep, map_was_empty: bool, twist: np.ndarray,
             speed_sigma: float | None = 0.0) -> list[StartSweep] | None:
         """Record a sweep just inserted into the map (``map_was_empty``: the first of a new
