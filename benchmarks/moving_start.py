@@ -175,7 +175,9 @@ def main(argv=None) -> int:
               "rows": rows}
     command = ("python -m benchmarks.moving_start"
                + (f" --resolution {args.resolution}" if args.resolution != "32x512" else "")
-               + (f" --duration {args.duration:g}" if args.duration != 20.0 else ""))
+               + (f" --duration {args.duration:g}" if args.duration != 20.0 else "")
+               + (f" --variants {' '.join(repr(v) for v in args.variants)}"
+                  if args.variants != list(VARIANTS) else ""))
     args.out.mkdir(parents=True, exist_ok=True)
     plot(curves, args.out / "moving_start.png")
     path = write_results(args.out, "moving_start", markdown(report, command), report)
