@@ -7,15 +7,17 @@ Without wheel odometry the fusion starts at zero velocity with a loose prior (an
 tell driving from rest). For each window (a suite scenario cut to start while the robot
 drives; 32x512, seed 0, 20 s, the wheel topic ignored) this runs `lili`:
 
-* with the defaults, and with the start velocity given: the truth's body velocity at the
-  first scan scaled by each ``--scales`` factor, held by the estimator's tight velocity prior
-  (``FusionEstimator.initialize(velocity=...)``, ``prior_sigma_velocity``); ATE after SE(3)
-  alignment and end-point error [m];
+* with the start speed search off (zero start velocity, loose prior), with the defaults
+  (the search of :mod:`lili_odom.pipeline.start_speed`), and with the start velocity given:
+  the truth's body velocity at the first scan scaled by each ``--scales`` factor, held by the
+  estimator's tight velocity prior (``FusionEstimator.initialize(velocity=...)``,
+  ``prior_sigma_velocity``); ATE after SE(3) alignment and end-point error [m];
 * the point-to-plane cost of the first two sweeps over forward speeds 0-3 m/s (both deskewed
   with the speed, the second placed at the speed's travel and fitted to the first one's planes:
   ``fit_planes`` / ``plane_cost`` of :mod:`lili_odom.pipeline.plane_refinement`, the pipeline's
   voxelisation; the rotation over the sweeps from the gyro's mean rate), its minimum against
-  the true speed: could the speed be found from the LiDAR?
+  the true speed, and what :func:`lili_odom.pipeline.start_speed.forward_speed` finds with
+  its defaults.
 
 Writes ``benchmarks/results/<name>.{md,json}`` (default ``start_speed``).
 """
@@ -30,17 +32,23 @@ import numpy as np
 
 from benchmarks._common import RESULTS, config_with, machine_info, write_results
 from benchmarks._pieces import piece_bag
+from lili_odom.pipeline.scan_matcher import ScanMatcher
+from lili_odom.pipeline.start_speed import StartSpeedConfig, forward_speed
+from lili_odom.pipeline.start_sweeps import StartSweep
 
 WINDOWS = ("building:30", "parking_lot:20", "airfield:30", "long_tunnel:30")
 SPEEDS = np.round(np.arange(0.0, 3.0001, 0.1), 2)
 
 
-def _run(bag: Path, out: Path, body_velocity: np.ndarray | None = None) -> dict:
-    """`lili` without wheels over ``bag``; the start velocity given in base_link when set.
-    Returns the metrics, the truth and the first two scans."""
+def _run(bag: Path, out: Path, body_velocity: np.ndarray | None = None,
+         search: bool = True) -> dict:
+    """`lili` without wheels over ``bag``; the start velocity given in base_link when set,
+    the start speed search (``pipeline.start_speed``) off unless ``search``. Returns the
+    metrics, the counters, the truth and the first two scans."""
     from lili_odom.evaluation.runner import run_bag
 
-    config = dataclasses.replace(config_with({"method": "lili"}, prog="start_speed"),
+    overrides = {"method": "lili", "start_speed.enabled": search}
+    config = dataclasses.replace(config_with(overrides, prog="start_speed"),
                                  wheel_topic="/none")
     captured: dict = {"scans": []}
 
@@ -78,7 +86,8 @@ def _run(bag: Path, out: Path, body_velocity: np.ndarray | None = None) -> dict:
     finally:
         pipeline_cls.process_scan = original_process
     truth = np.loadtxt(out / "truth.tum", ndmin=2)
-    return {"metrics": run.summary["metrics"], "truth": truth, **captured}
+    return {"metrics": run.summary["metrics"], "counters": run.summary.get("counters", {}),
+            "truth": truth, **captured}
 
 
 def _body_velocity(truth: np.ndarray, stamp: float) -> np.ndarray:
@@ -118,11 +127,17 @@ def speed_costs(scans: list, matcher_config, T_base_lidar: np.ndarray, rate: np.
 
 def study(scenario: str, start: float, scales: list[float], tmp: Path) -> dict:
     bag = piece_bag(scenario, start, 20.0, (32, 512), 0, progress=False)
-    base = _run(bag, tmp / f"{scenario}_default")
+    base = _run(bag, tmp / f"{scenario}_zero", search=False)
     first_stamp = base["scans"][0].stamp
     v_true = _body_velocity(base["truth"], first_stamp)
-    rows = [{"start": "zero, loose (default)", "ate_m": base["metrics"]["ate_rmse_m"],
+    rows = [{"start": "zero, loose (search off)", "ate_m": base["metrics"]["ate_rmse_m"],
              "final_m": base["metrics"]["final_error_m"]}]
+    found = _run(bag, tmp / f"{scenario}_found")
+    label = ("searched, found (default)" if found["counters"].get("start_speed_found")
+             else "searched, not found (default)")
+    rows.append({"start": label, "ate_m": found["metrics"]["ate_rmse_m"],
+                 "final_m": found["metrics"]["final_error_m"]})
+    print(f"  {scenario} {label}: ATE {rows[-1]['ate_m']:.3f} m", flush=True)
     for k in scales:
         r = _run(bag, tmp / f"{scenario}_{k:g}", body_velocity=k * v_true)
         rows.append({"start": f"{k:g} x truth", "ate_m": r["metrics"]["ate_rmse_m"],
@@ -130,17 +145,26 @@ def study(scenario: str, start: float, scales: list[float], tmp: Path) -> dict:
         print(f"  {scenario} {k:g} x truth: ATE {rows[-1]['ate_m']:.3f} m", flush=True)
     costs = speed_costs(base["scans"], base["matcher_config"], base["T_base_lidar"],
                         base["rate"])
+    searched = forward_speed(*(StartSweep(s.points, s.times, np.eye(4), np.eye(4),
+                                          s.stamp + float(s.times.min()),
+                                          s.stamp + float(s.times.max()))
+                               for s in base["scans"]),
+                             ScanMatcher(base["matcher_config"]), base["T_base_lidar"],
+                             base["rate"], StartSpeedConfig())
     return {"window": f"{scenario} {start:g}-{start + 20:g} s", "true_speed": float(v_true[0]),
             "runs": rows, "speeds": SPEEDS.tolist(), "costs": costs,
-            "cost_argmin": float(SPEEDS[int(np.argmin(costs))])}
+            "cost_argmin": float(SPEEDS[int(np.argmin(costs))]),
+            "searched_speed": searched.speed, "searched_rise": searched.rise}
 
 
 def markdown(report: dict, command: str) -> str:
     lines = ["# The speed at a start while driving, without wheels", "",
              f"`{command}` (`benchmarks/studies/start_speed.py`): `lili` without wheel odometry "
              "over suite windows that start while the robot drives (32x512, seed 0, 20 s). "
-             "Start velocity: the default (zero, loose prior) or the truth's body velocity at "
-             "the first scan times a factor, held by the tight velocity prior. Speed from the "
+             "Start velocity: zero with a loose prior (the start speed search off), the "
+             "default (the speed searched from the first two sweeps, `pipeline.start_speed`), "
+             "or the truth's body velocity at the first scan times a factor, held by the tight "
+             "velocity prior. Speed from the "
              "LiDAR: the forward speed at which the first two sweeps, deskewed with it, fit "
              "each other's planes best (0-3 m/s in 0.1 m/s steps; rotation from the gyro).", "",
              f"Commit `{report['machine']['commit']}`.", "",
@@ -150,12 +174,15 @@ def markdown(report: dict, command: str) -> str:
         for r in w["runs"]:
             lines.append(f"| {w['window']} | {w['true_speed']:.2f} | {r['start']} | "
                          f"{r['ate_m']:.3f} | {r['final_m']:.3f} |")
-    lines += ["", "| window | true speed [m/s] | two-sweep cost minimum [m/s] | cost at 0 / "
-              "minimum / at 3 m/s |", "|---|---:|---:|---|"]
+    lines += ["", "| window | true speed [m/s] | cost minimum, 0-3 m/s grid [m/s] | cost at 0 / "
+              "minimum / at 3 m/s | `forward_speed` (defaults) [m/s] | its cost rise |",
+              "|---|---:|---:|---|---:|---:|"]
     for w in report["windows"]:
         c = w["costs"]
+        found = "not found" if w["searched_speed"] is None else f"{w['searched_speed']:.2f}"
         lines.append(f"| {w['window']} | {w['true_speed']:.2f} | {w['cost_argmin']:.1f} | "
-                     f"{c[0]:.4f} / {min(c):.4f} / {c[-1]:.4f} |")
+                     f"{c[0]:.4f} / {min(c):.4f} / {c[-1]:.4f} | {found} | "
+                     f"{w['searched_rise']:.3f} |")
     return "\n".join(lines) + "\n"
 
 
