@@ -43,8 +43,8 @@ class StartSpeedConfig:
         coarse_step: step of the first pass [m/s]; default 0.25.
         fine_step: step of the second pass, one coarse step either side of the first pass's
             best [m/s]; default 0.05.
-        rise_at: the cost is compared this far either side of the best speed [m/s]
-            (clipped to the range); default 1.
+        rise_at: the cost is compared this far either side of the best speed [m/s] (also
+            beyond ``max_speed``); default 1.
         min_rise: the cost there must be higher by at least this fraction on both sides, or
             the speed counts as not found (dimensionless); default 0.05.
         velocity_sigma: sigma of the start velocity prior at the found speed [m/s]; default
@@ -155,7 +155,7 @@ def forward_speed(first: StartSweep, second: StartSweep, matcher: ScanMatcher,
     c = cost(best)
     if not np.isfinite(c) or c <= 0:
         return StartSpeed(None, 0.0, dict(costs))
-    sides = [cost(np.clip(best - config.rise_at, -m, m)), cost(np.clip(best + config.rise_at, -m, m))]
+    sides = [cost(best - config.rise_at), cost(best + config.rise_at)]
     rise = float(min(sides) / c - 1.0) if np.all(np.isfinite(sides)) else 0.0
     speed = float(best) if rise >= config.min_rise else None
     return StartSpeed(speed, rise, dict(costs))
