@@ -66,7 +66,7 @@ def test_bad_input_gives_none_instead_of_raising():
 def test_config_ranges_are_checked():
     StartSpeedConfig().validate()
     for bad in ({"fine_step": 0.5}, {"max_speed": 0.0}, {"velocity_sigma": -1.0},
-                {"min_rise": float("nan")}):
+                {"min_rise": float("nan")}, {"min_speed": 5.0}):
         with pytest.raises(ValueError):
             StartSpeedConfig(**bad).validate()
 
@@ -78,6 +78,13 @@ def test_the_pipeline_restarts_at_the_found_speed_without_wheels():
     errors, rebuilt = _drive(redeskew=True, start_speed=True, counters=counters)
     assert counters.get("start_speed_found") == 1 and rebuilt >= 1
     assert errors.max() < 0.03, errors
+
+
+def test_a_start_at_rest_is_kept_as_it_was():
+    counters: dict = {}
+    errors, _ = _drive(redeskew=True, start_speed=True, speed=0.0, scans=3, counters=counters)
+    assert counters.get("start_speed_slow") == 1 and not counters.get("start_speed_found")
+    assert errors.max() < 0.01, errors
 
 
 def test_the_pipeline_keeps_the_loose_start_where_no_speed_fits(caplog):

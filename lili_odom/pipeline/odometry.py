@@ -559,8 +559,9 @@ class OdometryPipeline:
 
     def _find_start_speed(self, second: StartSweep) -> None:
         """At the second scan of a start whose speed is unknown (no wheel odometry), find the
-        forward speed from the first two sweeps; when found, restart the fusion at the first
-        scan with it and rebuild the map from the first sweep deskewed with it."""
+        forward speed from the first two sweeps; when found and at least ``min_speed``,
+        restart the fusion at the first scan with it and rebuild the map from the first
+        sweep deskewed with it."""
         first, self._first_sweep = self._first_sweep, None
         cfg = self.config.start_speed
         est = self.estimator
@@ -581,9 +582,13 @@ class OdometryPipeline:
             log.info("start speed not found from the first two sweeps (cost rise %.3f)",
                      found.rise)
             return
+        if abs(found.speed) < cfg.min_speed:
+            self.counters["start_speed_slow"] += 1
+            log.info("start speed %.2f m/s from the first two sweeps, below min_speed: the "
+                     "start is kept", found.speed)
+            return
         self.counters["start_speed_found"] += 1
-        log.info("start speed %.2f m/s forward, from the first two sweeps",
-                 found.speed)
+        log.info("start speed %.2f m/s forward, from the first two sweeps", found.speed)
         T0 = self._last_output.pose
         body = np.concatenate([[found.speed, 0.0, 0.0], rate])
         est.initialize(first.t_last, pose=T0, velocity=T0[:3, :3] @ body[:3],

@@ -47,6 +47,10 @@ class StartSpeedConfig:
             beyond ``max_speed``); default 1.
         min_rise: the cost there must be higher by at least this fraction on both sides, or
             the speed counts as not found (dimensionless); default 0.05.
+        min_speed: a found speed below this [m/s] leaves the start as it is (zero, loose
+            prior): at rest or creeping, the registration's pull towards the previous pose
+            does no harm, and the registration holds the start better than the search's
+            0.05-0.1 m/s; default 0.3.
         velocity_sigma: sigma of the start velocity prior at the found speed [m/s]; default
             0.2.
         points: raw points per sweep searched with (evenly thinned before the voxelisation:
@@ -60,6 +64,7 @@ class StartSpeedConfig:
     fine_step: float = 0.05
     rise_at: float = 1.0
     min_rise: float = 0.05
+    min_speed: float = 0.3
     velocity_sigma: float = 0.2
     points: int = 20000
 
@@ -75,6 +80,7 @@ class StartSpeedConfig:
         check_range(prefix + "rise_at", self.rise_at, 0.0, 2 * self.max_speed, lo_open=True,
                     unit="m/s")
         check_range(prefix + "min_rise", self.min_rise, 0.0, 10.0)
+        check_range(prefix + "min_speed", self.min_speed, 0.0, self.max_speed, unit="m/s")
         check_range(prefix + "velocity_sigma", self.velocity_sigma, 0.0, 100.0, lo_open=True,
                     unit="m/s")
         check_range(prefix + "points", self.points, 1000, 10_000_000)
