@@ -53,8 +53,9 @@ class StartSpeedConfig:
             0.05-0.1 m/s; default 0.3.
         velocity_sigma: sigma of the start velocity prior at the found speed [m/s]; default
             0.2.
-        points: raw points per sweep searched with (evenly thinned before the voxelisation:
-            the search costs a deskew of both sweeps per speed tried); default 20000.
+        points: raw points per sweep searched with (drawn at random before the
+            voxelisation: the search costs a deskew of both sweeps per speed tried); default
+            20000.
     """
 
     enabled: bool = True
@@ -118,11 +119,12 @@ def _cost(first: StartSweep, second: StartSweep, speed: float, rate: np.ndarray,
 
 
 def _thinned(sweep: StartSweep, points: int) -> StartSweep:
-    """``sweep`` with at most about ``points`` of its points, evenly spaced."""
-    step = -(-len(sweep.points) // points)
-    if step <= 1:
+    """``sweep`` with ``points`` of its points drawn at random (seeded: the same sweep gives
+    the same points; a regular stride would follow the sensor's ring and column pattern)."""
+    if len(sweep.points) <= points:
         return sweep
-    return StartSweep(sweep.points[::step], sweep.times[::step], sweep.motion, sweep.pose,
+    keep = np.sort(np.random.default_rng(0).choice(len(sweep.points), points, replace=False))
+    return StartSweep(sweep.points[keep], sweep.times[keep], sweep.motion, sweep.pose,
                       sweep.t_first, sweep.t_last)
 
 
