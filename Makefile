@@ -51,11 +51,12 @@ benchmark-robustness: $(STAMP)
 	$(PY) -m benchmarks.long_run
 
 # The scenario suite: every scenario (each one's own sensor and window), our methods and the
-# peers (KISS-ICP, GenZ-ICP, RKO-LIO, wheels), one seed each, into benchmarks/results/suite.
-# Bags are simulated once into the simulator cache. Several hours on 2 cores.
+# peers (KISS-ICP, GenZ-ICP, RKO-LIO, wheels), every seed, into benchmarks/results/suite.
+# Bags are simulated once into the simulator cache. About 2.5 hours on 2 cores; --resume
+# continues an interrupted run.
 benchmark-suite: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[peers]'
-	$(PY) -m lili_odom.cli suite --preset full --max-seeds 1 --jobs 2 --out benchmarks/results/suite
+	$(PY) -m lili_odom.cli suite --preset full --jobs 2 --resume --out benchmarks/results/suite
 
 # Are the suite's rows the same on `--backend local` and `--backend ray` (a local Ray instance)?
 # CI pieces of two scenarios, deterministic configuration; see docs/cluster.md.
