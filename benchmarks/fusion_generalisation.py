@@ -27,7 +27,7 @@ import numpy as np
 
 from benchmarks._common import RESULTS, ROOT
 from lili_odom.config import load_config
-from lili_odom.evaluation.comparison import run_label
+from benchmarks._comparison import run_label
 from lili_odom.evaluation.runner import run_bag
 
 DEFAULT_OUT = RESULTS / "fusion_generalisation"

@@ -25,8 +25,8 @@ from pathlib import Path
 
 from benchmarks._common import RESULTS, ROOT, SIM_CACHE, write_results
 from lili_odom.config import load_config
-from lili_odom.evaluation.comparison import run_label as _label
-from lili_odom.evaluation.comparison import seeds_table
+from benchmarks._comparison import run_label as _label
+from benchmarks._comparison import seeds_table
 from lili_odom.evaluation.runner import run_bag
 from lili_odom.sim.generator import ensure_trial_bag
 

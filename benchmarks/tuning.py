@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
 
-    from lili_odom.evaluation.comparison import run_label
+    from benchmarks._comparison import run_label
     from lili_odom.suite.backends import LocalBackend
     from lili_odom.suite.runner import SuiteRequest, run_suite
     from lili_odom.suite.scenario import load_scenarios

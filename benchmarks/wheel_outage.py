@@ -37,8 +37,8 @@ from pathlib import Path
 
 from benchmarks._common import RESULTS, ROOT, SIM_CACHE
 from benchmarks.faults import worker_fault_run
-from lili_odom.evaluation.comparison import matching_runs, paired_table
-from lili_odom.evaluation.comparison import run_label as _label
+from benchmarks._comparison import matching_runs, paired_table
+from benchmarks._comparison import run_label as _label
 from lili_odom.sim.generator import ensure_trial_bag
 
 

@@ -1,6 +1,6 @@
-"""lili_odom.evaluation.comparison: run names, the table over seeds, paired differences and
+"""benchmarks._comparison: run names, the table over seeds, paired differences and
 the reuse of stored runs (the benchmarks' seeds and wheel-outage reports)."""
-from lili_odom.evaluation.comparison import matching_runs, paired_table, run_label, seeds_table
+from benchmarks._comparison import matching_runs, paired_table, run_label, seeds_table
 
 TARGETS = {1: {"ate_m": 0.25, "rpe_m": 0.40}, 2: {"ate_m": 0.45}}
 
