@@ -33,7 +33,8 @@ import numpy as np
 from benchmarks._common import RESULTS, config_with, machine_info, write_results
 from benchmarks._pieces import piece_bag
 from lili_odom.pipeline.scan_matcher import ScanMatcher
-from lili_odom.pipeline.start_speed import StartSpeedConfig, forward_speed
+from lili_odom.pipeline.plane_refinement import PlaneRefinementConfig
+from lili_odom.pipeline.start_speed import StartSpeedConfig, forward_speed, speed_cost
 from lili_odom.pipeline.start_sweeps import StartSweep
 
 WINDOWS = ("building:30", "parking_lot:20", "airfield:30", "long_tunnel:30")
@@ -102,27 +103,17 @@ def _body_velocity(truth: np.ndarray, stamp: float) -> np.ndarray:
 
 def speed_costs(scans: list, matcher_config, T_base_lidar: np.ndarray, rate: np.ndarray,
                 speeds: np.ndarray = SPEEDS) -> list[float]:
-    """Point-to-plane cost of the second sweep on the first one's planes per forward speed
+    """:func:`lili_odom.pipeline.start_speed.speed_cost` of the two scans per forward speed
     (base_link, with the angular ``rate`` [rad/s, base_link] of the gyro)."""
-    from lili_odom import geometry
-    from lili_odom.degeneracy.reference import ReferenceMap
-    from lili_odom.pipeline.plane_refinement import PlaneRefinementConfig, fit_planes, plane_cost
-    from lili_odom.pipeline.scan_matcher import ScanMatcher
-
+    first, second = (_sweep(s) for s in scans)
     matcher = ScanMatcher(matcher_config)
-    refine = PlaneRefinementConfig()
-    to_lidar = geometry.adjoint(np.linalg.inv(T_base_lidar))
-    spans = [(s.stamp + float(s.times.min()), s.stamp + float(s.times.max())) for s in scans]
-    costs = []
-    for v in speeds:
-        twist = to_lidar @ np.concatenate([[v, 0.0, 0.0], rate])
-        first, second = (matcher.preprocess(s.points, s.times, geometry.exp(twist * (b - a)))[0]
-                         for s, (a, b) in zip(scans, spans))
-        reference = ReferenceMap.from_points(first, matcher.config.voxel,
-                                             matcher.config.max_points_per_voxel)
-        pose = geometry.exp(twist * (spans[1][1] - spans[0][1]))
-        costs.append(plane_cost(fit_planes(second, reference, pose, refine), pose, refine))
-    return costs
+    return [speed_cost(first, second, float(v), rate, matcher, T_base_lidar,
+                       PlaneRefinementConfig()) for v in speeds]
+
+
+def _sweep(scan) -> StartSweep:
+    return StartSweep(scan.points, scan.times, np.eye(4), np.eye(4),
+                      scan.stamp + float(scan.times.min()), scan.stamp + float(scan.times.max()))
 
 
 def study(scenario: str, start: float, scales: list[float], tmp: Path) -> dict:
@@ -145,10 +136,7 @@ def study(scenario: str, start: float, scales: list[float], tmp: Path) -> dict:
         print(f"  {scenario} {k:g} x truth: ATE {rows[-1]['ate_m']:.3f} m", flush=True)
     costs = speed_costs(base["scans"], base["matcher_config"], base["T_base_lidar"],
                         base["rate"])
-    searched = forward_speed(*(StartSweep(s.points, s.times, np.eye(4), np.eye(4),
-                                          s.stamp + float(s.times.min()),
-                                          s.stamp + float(s.times.max()))
-                               for s in base["scans"]),
+    searched = forward_speed(*(_sweep(s) for s in base["scans"]),
                              ScanMatcher(base["matcher_config"]), base["T_base_lidar"],
                              base["rate"], StartSpeedConfig())
     return {"window": f"{scenario} {start:g}-{start + 20:g} s", "true_speed": float(v_true[0]),

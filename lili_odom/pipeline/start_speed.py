@@ -103,8 +103,13 @@ class StartSpeed:
     costs: dict[float, float] = field(default_factory=dict)
 
 
-def _cost(first: StartSweep, second: StartSweep, speed: float, rate: np.ndarray,
-          matcher: ScanMatcher, T_base_lidar: np.ndarray, refine: PlaneRefinementConfig) -> float:
+def speed_cost(first: StartSweep, second: StartSweep, speed: float, rate: np.ndarray,
+               matcher: ScanMatcher, T_base_lidar: np.ndarray,
+               refine: PlaneRefinementConfig) -> float:
+    """Point-to-plane cost (:func:`~lili_odom.pipeline.plane_refinement.plane_cost`, lower
+    fits better; inf when nothing fits) of ``second`` on ``first``'s planes, both deskewed with
+    base_link moving at ``speed`` [m/s] forward and turning at ``rate`` [rad/s], ``second``
+    placed at that motion's travel between the sweeps' last points."""
     twist = geometry.adjoint(np.linalg.inv(T_base_lidar)) @ np.concatenate([[speed, 0.0, 0.0],
                                                                              rate])
     ref_points, _ = matcher.preprocess(first.points, first.times,
@@ -151,7 +156,7 @@ def forward_speed(first: StartSweep, second: StartSweep, matcher: ScanMatcher,
     def cost(v: float) -> float:
         v = round(float(v), 6)
         if v not in costs:
-            costs[v] = _cost(first, second, v, rate, matcher, T_base_lidar, refine)
+            costs[v] = speed_cost(first, second, v, rate, matcher, T_base_lidar, refine)
         return costs[v]
 
     m = config.max_speed
