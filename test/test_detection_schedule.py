@@ -90,6 +90,19 @@ def test_max_reuse_zero_detects_every_scan():
     assert sched.reusable(_pose()) is None
 
 
+def test_a_screened_scan_is_carried_over_but_never_reused():
+    sched = DetectionSchedule()
+    sched.record(_result(_pose(), [[1, 0, 0, 0, 0, 0]]))
+    sched.screened(_result(_pose(0.1), np.zeros((0, 6))))  # the detection is within reach
+    assert sched.reusable(_pose(0.2)).dimension == 1
+    sched.screened(_result(_pose(5.0), np.zeros((0, 6))))  # out of reach: replaced
+    assert sched.reusable(_pose(5.0)) is None  # a screened result is never reused ...
+    assert sched.has_last and sched.stale(_pose(5.1)).dimension == 0  # ... only carried
+    fresh = DetectionSchedule()
+    fresh.screened(_result(_pose(), np.zeros((0, 6))))
+    assert fresh.has_last and fresh.reusable(_pose()) is None
+
+
 def test_pipeline_counts_detections_and_reuses():
     """In a closed room at rest: one detection, then ``max_reuse`` reuses (the default
     schedule), then a detection again."""
@@ -98,6 +111,7 @@ def test_pipeline_counts_detections_and_reuses():
 
     cfg = PipelineConfig(method="hessian")
     cfg.detection_schedule.background = False  # every detection serves its own scan
+    cfg.plane_refinement.screen_detections = False  # the room's planes hold every direction
     pipe = OdometryPipeline(cfg)
     n = pipe.config.detection_schedule.max_reuse
     assert n >= 1

@@ -134,6 +134,7 @@ def test_a_late_background_result_is_applied_when_it_arrives():
     room = closed_room(seed=0)
     cfg = PipelineConfig(method="hessian")
     cfg.detection_schedule.max_reuse = 4
+    cfg.plane_refinement.screen_detections = False  # the room would skip the detector
     cfg.detection_schedule.background_lag = 2
     pipe = OdometryPipeline(cfg, max_detection_wait_s=0.0)
     waits = []
@@ -197,6 +198,7 @@ def test_the_pipeline_applies_background_results_lag_scans_later():
     room = closed_room(seed=0)
     cfg = PipelineConfig(method="hessian")
     cfg.detection_schedule.max_reuse = 4
+    cfg.plane_refinement.screen_detections = False  # the room would skip the detector
     cfg.detection_schedule.background_lag = 2
     pipe = OdometryPipeline(cfg)
     try:
@@ -217,6 +219,7 @@ def test_the_pipeline_detects_in_its_main_loop_when_the_worker_is_gone():
     room = closed_room(seed=1)
     cfg = PipelineConfig(method="hessian")
     cfg.detection_schedule.max_reuse = 1
+    cfg.plane_refinement.screen_detections = False  # the room would skip the detector
     cfg.detection_schedule.background_lag = 2
     cfg.detection_schedule.background_timeout_s = 5
     pipe = OdometryPipeline(cfg)
@@ -241,6 +244,7 @@ def test_a_started_pipeline_has_its_worker_before_the_first_scan_and_the_same_re
     room = closed_room(seed=2)
     cfg = PipelineConfig(method="hessian")
     cfg.detection_schedule.max_reuse = 2
+    cfg.plane_refinement.screen_detections = False  # the room would skip the detector
     poses = {}
     for started in (False, True):
         pipe = OdometryPipeline(cfg)

@@ -176,6 +176,36 @@ def test_weak_directions_add_what_point_to_plane_does_not_hold():
     assert off._weak_directions(planes(off, scan_at(tube, 100.0)), here, here, none) is None
 
 
+class _NoDetector:
+    name = "lili"
+
+    def detect(self, *args, **kwargs):
+        raise AssertionError("the detector ran on a screened scan")
+
+
+def test_a_scan_its_planes_hold_in_every_direction_skips_the_detector():
+    room = corridor(12.0, end_walls=True)
+    pipeline = _pipeline_over(room, 5.9)
+    pipeline._detector = _NoDetector()
+    here, scan = pose_at(6.0), scan_at(room, 6.0)
+    result = pipeline._detection(scan, here, here, planes(pipeline, scan))
+    limit = pipeline.config.plane_refinement.clear_information
+    assert result.ok and not result.degenerate and result.details["screened"]
+    assert result.details["min_information"] >= limit
+    assert pipeline.counters["detections_screened"] == 1
+    assert pipeline.counters["detections"] == 0
+
+    tube = corridor(200.0, end_walls=False)  # nothing holds the axis: the detector decides
+    open_ended = _pipeline_over(tube, 99.9)
+    open_ended._detector = _NoDetector()
+    at100, tube_scan = pose_at(100.0), scan_at(tube, 100.0)
+    assert open_ended._screen(tube_scan, at100, planes(open_ended, tube_scan)) is None
+    off = _pipeline_over(room, 5.9)
+    off._detector = _NoDetector()
+    off.config.plane_refinement.screen_detections = False
+    assert off._screen(scan, here, planes(off, scan)) is None
+
+
 def test_along_track_covers_the_travel_outside_a_detected_subspace():
     from lili_odom.degeneracy.result import DegeneracyResult
 

@@ -11,6 +11,11 @@ one with the adjoint of the relative pose and re-orthonormalised in the scaled s
 
 ``max_reuse = 0`` runs the detector on every scan (the paper's setting).
 
+A scan the odometry finds constrained without the detector (``screened``: its point-to-plane
+planes hold every direction, :class:`lili_odom.pipeline.plane_refinement.PlaneRefinementConfig`
+``screen_detections``) does not run it; it becomes the result carried over while the next
+detection is computed once the last detection is out of reach, but is never reused itself.
+
 In the *background* (``background``, default), a detection that is due runs in a process of
 its own (:mod:`lili_odom.pipeline.detection_worker`) while the main loop goes on: the scan that
 asked for it, and the next ones until the result is applied, carry the last result over
@@ -147,18 +152,30 @@ class DetectionSchedule:
             self._travelled = 0.0
             self._last_pose = None
 
-    def reusable(self, pose: np.ndarray) -> DegeneracyResult | None:
-        """The last detection carried over to ``pose``, or None when the detector must run."""
+    def _within_reach(self, pose: np.ndarray) -> bool:
+        """The last detection may serve ``pose`` (age, distance and angle bounds)."""
         cfg, last = self.config, self._last
         if last is None or self._age >= cfg.max_reuse:
-            return None
+            return False
         delta = np.linalg.inv(last.pose) @ pose
-        if np.linalg.norm(delta[:3, 3]) > cfg.reuse_distance_m:
-            return None
-        if _angle_deg(delta) > cfg.reuse_angle_deg:
+        return bool(np.linalg.norm(delta[:3, 3]) <= cfg.reuse_distance_m
+                    and _angle_deg(delta) <= cfg.reuse_angle_deg)
+
+    def reusable(self, pose: np.ndarray) -> DegeneracyResult | None:
+        """The last detection carried over to ``pose``, or None when the detector must run."""
+        if not self._within_reach(pose):
             return None
         self._age += 1
-        return carry_over(last, pose, self._age)
+        return carry_over(self._last, pose, self._age)
+
+    def screened(self, result: DegeneracyResult) -> None:
+        """A scan found constrained without the detector (``result``: not degenerate, at the
+        scan's pose). It replaces the last detection once that one can no longer serve this
+        pose, as what is carried over (``stale``) while the next detection is computed, but
+        is never reused in place of one: the next scan the screen does not pass is
+        detected."""
+        if not self._within_reach(result.pose):
+            self._last, self._age = result, self.config.max_reuse
 
     @property
     def has_last(self) -> bool:

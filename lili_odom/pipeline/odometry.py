@@ -42,6 +42,7 @@ from functools import cache, partial
 import numpy as np
 
 from lili_odom import geometry
+from lili_odom.degeneracy.config import usable_length
 from lili_odom.degeneracy.hessian import HessianConfig, HessianDetector, ZhangConfig, ZhangDetector
 from lili_odom.degeneracy.lili import LiliConfig, LiliDetector
 from lili_odom.degeneracy.result import DegeneracyResult
@@ -396,10 +397,11 @@ class OdometryPipeline:
 
         degeneracy = None
         t0 = time.perf_counter()
+        planes = PlaneFitCache(map_points, self._matcher.reference, self.config.plane_refinement)
         if self._detector is not None and not reg.ok:
             self._forget_detections()
         if self._detector is not None and reg.ok and not first:
-            degeneracy = self._detection(source, guess, reg.pose)
+            degeneracy = self._detection(source, guess, reg.pose, planes)
             degeneracy = self._schedule.hold(degeneracy, reg.pose)
             if degeneracy.details.get("held"):
                 self.counters["detections_held"] += 1
@@ -418,7 +420,6 @@ class OdometryPipeline:
         timings["remap"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
-        planes = PlaneFitCache(map_points, self._matcher.reference, self.config.plane_refinement)
         if degeneracy is not None and degeneracy.ok and self._last_output is not None:
             weak = self._weak_directions(planes, measured, guess, degeneracy)
             if weak is not None:
@@ -628,14 +629,19 @@ class OdometryPipeline:
             return source[:: int(np.ceil(len(source) / n))]
         return source
 
-    def _detection(self, source: np.ndarray, guess: np.ndarray,
-                   pose: np.ndarray) -> DegeneracyResult:
-        """This scan's detection (registered at ``pose`` from ``guess``): a recent one
-        carried over, a background result that is due, or a new detection
-        (:mod:`lili_odom.pipeline.detection_schedule`)."""
+    def _detection(self, source: np.ndarray, guess: np.ndarray, pose: np.ndarray,
+                   planes: PlaneFitCache) -> DegeneracyResult:
+        """This scan's detection (registered at ``pose`` from ``guess``): constrained by its
+        planes (:meth:`_screen`), a recent one carried over, a background result that is due,
+        or a new detection (:mod:`lili_odom.pipeline.detection_schedule`)."""
         self._detection_seq += 1
         seq = self._detection_seq
         self._collect_background(seq)
+        screened = self._screen(source, pose, planes)
+        if screened is not None:
+            self.counters["detections_screened"] += 1
+            self._schedule.screened(screened)
+            return screened
         worker = self._worker
         background = worker is not None and worker.alive
         degeneracy = self._schedule.reusable(pose)
@@ -654,6 +660,34 @@ class OdometryPipeline:
         self._schedule.record(degeneracy)
         self.counters["detections"] += 1
         return degeneracy
+
+    def _screen(self, source: np.ndarray, pose: np.ndarray,
+                planes: PlaneFitCache) -> DegeneracyResult | None:
+        """A not-degenerate result for the scan registered at ``pose`` when its point-to-plane
+        planes hold every direction with at least ``plane_refinement.clear_information``
+        (``screen_detections``), else None (the detector decides).
+
+        The information is the debiased point-to-plane information of the registration over
+        all six scaled twists (characteristic length of ``source``, as the detectors scale),
+        on the planes the later checks use. Any direction a detection flagged on such a scan
+        would be cleared by those checks (:meth:`_clear_held_directions`), so the detection
+        is not run: in a constrained place the detector's cost is saved and its false flags
+        (point-to-point perturbations held back by a young map) cannot steer the remapping.
+        """
+        cfg = self.config.plane_refinement
+        if not (cfg.enabled and cfg.screen_detections and cfg.clear_information > 0):
+            return None
+        length = usable_length(source)
+        full = refine_in_subspace(planes.points, planes.reference, pose, np.eye(6), length,
+                                  replace(cfg, iterations=0), fits=planes.at(pose))
+        if not (full.ok and np.all(np.isfinite(full.information))):
+            return None
+        weakest = float(np.linalg.eigvalsh(full.information)[0])
+        if weakest < cfg.clear_information:
+            return None
+        return DegeneracyResult(method=self._detector.name, pose=np.asarray(pose, dtype=float),
+                                basis_scaled=np.zeros((0, 6)), characteristic_length=length,
+                                details={"screened": True, "min_information": weakest})
 
     def _submit(self, seq: int, source: np.ndarray, guess: np.ndarray,
                 pose: np.ndarray) -> None:

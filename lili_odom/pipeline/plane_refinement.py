@@ -102,6 +102,12 @@ class PlaneRefinementConfig:
             at least this [1/m^2] is measured by the refined pose like a constrained one and
             removed from the degenerate subspace (default 2500: a 2 cm sigma, the configured
             LiDAR translation sigma); 0 = never.
+        screen_detections: skip the degeneracy detector on a scan whose registration the
+            planes hold in every direction with at least ``clear_information`` (the debiased
+            point-to-plane information over all six scaled twists, from the planes the checks
+            use anyway): such a scan counts as constrained, since every direction a detection
+            could flag there would be cleared again. Default True; False runs the detector
+            (or carries a detection over) on every scan.
         predicted_start: without wheel data, the refinement inside the subspace is also run
             from the fused prediction's components there and kept when it fits the planes
             better and they hold every direction of the subspace to
@@ -137,6 +143,7 @@ class PlaneRefinementConfig:
     min_along_information: float = 100.0
     clear_information: float = 2500.0
     refine_constrained: str = "planar"
+    screen_detections: bool = True
     predicted_start: bool = True
     vertical_lines: bool = False
     min_linearity: float = 0.8
