@@ -251,6 +251,22 @@ def test_plane_fits_are_shared_near_their_pose_and_found_again_farther_away():
     assert abs(own.pose[0, 3] - 20.0) < 0.03
 
 
+def test_probed_fits_serve_later_refinements_only_at_the_same_pose():
+    boxed = corridor(40.0, end_walls=True)
+    ref = ReferenceMap.from_points(boxed, 1.0, 200)
+    scan = scan_at(boxed, 20.0)
+    here = pose_at(20.0)
+    cache = PlaneFitCache(scan, ref)
+    probed = cache.probe(here)
+    assert cache.at(here.copy()) is probed and cache.queries == 1
+    nearby = PlaneFitCache(scan, ref)
+    probed = nearby.probe(here)
+    fits = nearby.at(pose_at(20.03))  # near enough to share, but planes are found again
+    assert fits is not probed and nearby.queries == 2
+    np.testing.assert_allclose(fits.pose, pose_at(20.03))
+    assert nearby.at(pose_at(20.0)) is fits  # from then on the usual sharing
+
+
 def test_constrained_directions_are_refined_where_point_to_plane_holds_them():
     from lili_odom.degeneracy.result import DegeneracyResult
 

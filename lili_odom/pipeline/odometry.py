@@ -679,7 +679,7 @@ class OdometryPipeline:
             return None
         length = usable_length(source)
         full = refine_in_subspace(planes.points, planes.reference, pose, np.eye(6), length,
-                                  replace(cfg, iterations=0), fits=planes.at(pose))
+                                  replace(cfg, iterations=0), fits=planes.probe(pose))
         if not (full.ok and np.all(np.isfinite(full.information))):
             return None
         weakest = float(np.linalg.eigvalsh(full.information)[0])

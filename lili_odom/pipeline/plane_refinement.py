@@ -400,13 +400,30 @@ class PlaneFitCache:
         self.config = config or PlaneRefinementConfig()
         self.queries = 0
         self._fits: PlaneFits | None = None
+        self._probe: tuple[np.ndarray, PlaneFits] | None = None
 
     def at(self, pose: np.ndarray) -> PlaneFits:
         """Plane fits usable for a refinement starting at ``pose``."""
+        if self._fits is None and self._probe is not None:
+            probed, fits = self._probe
+            self._probe = None
+            if np.array_equal(probed, pose):
+                self._fits = fits
         if self._fits is None or not self._fits.near(pose):
             self._fits = fit_planes(self.points, self.reference, pose, self.config)
             self.queries += 1
         return self._fits
+
+    def probe(self, pose: np.ndarray) -> PlaneFits:
+        """Plane fits at ``pose`` for a check made before the refinements: the first later
+        :meth:`at` reuses them only at exactly this pose and otherwise finds planes at its
+        own, as if the probe had not been made."""
+        if self._fits is not None or self._probe is not None:
+            return self.at(pose)
+        fits = fit_planes(self.points, self.reference, pose, self.config)
+        self.queries += 1
+        self._probe = (np.array(pose, dtype=float), fits)
+        return fits
 
 
 def _residuals(normals: np.ndarray, centroids: np.ndarray, points: np.ndarray,
