@@ -119,14 +119,13 @@ def pose_to_matrix(pose: Any) -> np.ndarray:
     q = getattr(pose, "orientation", None)
     if q is None:
         q = pose.rotation
-    quat = np.array([q.x, q.y, q.z, q.w], dtype=np.float64)
+    x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
     T = np.eye(4)
-    if not np.all(np.isfinite(quat)):
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if not all(map(math.isfinite, (x, y, z, w))):
         T[:3, :3] = np.nan
-    else:
-        norm = float(np.linalg.norm(quat))
-        if norm > 1e-12 and math.isfinite(norm):
-            T[:3, :3] = Rotation.from_quat(quat / norm).as_matrix()
+    elif norm > 1e-12 and math.isfinite(norm):
+        T[:3, :3] = gtsam.Rot3.Quaternion(w / norm, x / norm, y / norm, z / norm).matrix()
     T[:3, 3] = _xyz(position)
     return T
 
