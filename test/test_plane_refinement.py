@@ -206,6 +206,34 @@ def test_a_scan_its_planes_hold_in_every_direction_skips_the_detector():
     assert off._screen(scan, here, planes(off, scan)) is None
 
 
+def test_a_screened_scan_passes_the_weak_check_without_computing_it_again(monkeypatch):
+    from dataclasses import replace
+
+    import lili_odom.pipeline.odometry as odometry
+
+    calls = []
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return refine_in_subspace(*args, **kwargs)
+
+    monkeypatch.setattr(odometry, "refine_in_subspace", counted)
+    room = corridor(12.0, end_walls=True)
+    pipeline = _pipeline_over(room, 5.9)
+    pipeline._detector = _NoDetector()
+    here, scan = pose_at(6.0), scan_at(room, 6.0)
+    fits = planes(pipeline, scan)
+    screened = pipeline._screen(scan, here, fits)
+    assert screened is not None and len(calls) == 1
+    assert pipeline._weak_directions(fits, here, here, screened) is None
+    assert len(calls) == 1  # the screen's information already bounds every planar direction
+    # carried over to another scan it says nothing about that scan: the check runs, and here
+    # it agrees
+    carried = replace(screened, details={**screened.details, "reused": True})
+    assert pipeline._weak_directions(fits, here, here, carried) is None
+    assert len(calls) == 2
+
+
 def test_along_track_covers_the_travel_outside_a_detected_subspace():
     from lili_odom.degeneracy.result import DegeneracyResult
 

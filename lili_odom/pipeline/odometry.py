@@ -832,6 +832,8 @@ class OdometryPipeline:
             return None
         if float(np.linalg.norm(self._travel(guess))) < cfg.min_travel_m:
             return None
+        if _screened_here(degeneracy) and degeneracy.details["min_information"] >= limit:
+            return None  # every direction, so every planar one, holds at least that here
         B = degeneracy.basis_scaled
         length = degeneracy.characteristic_length
         C = self._outside(degeneracy, planar=True)
@@ -983,3 +985,11 @@ class OdometryPipeline:
         if last is not None and fused.t > last.stamp:
             w = geometry.log(np.linalg.inv(last.pose) @ fused.pose)[3:] / (fused.t - last.stamp)
         return np.concatenate([v, w])
+
+
+def _screened_here(degeneracy: DegeneracyResult) -> bool:
+    """True for this scan's own screen result (:meth:`OdometryPipeline._screen`), not one
+    carried over from an earlier scan nor merged with a held subspace."""
+    d = degeneracy.details
+    return bool(d.get("screened")) and not (d.get("reused") or d.get("held")
+                                            or len(degeneracy.basis_scaled))
