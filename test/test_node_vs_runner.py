@@ -29,17 +29,26 @@ BAG = Path(__file__).resolve().parents[1] / "bags" / "tunnel_entrance_32x256"
 METHOD = "none"  # the detectors are covered elsewhere; this checks the plumbing end to end
 
 
-def _runner_trajectory(tmp_path) -> np.ndarray:
+def _start_runner(tmp_path) -> tuple[subprocess.Popen, Path]:
+    """``lili-odom run`` on the bag in a subprocess (it runs while the node replays)."""
     out = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "lili_odom.cli", "run", str(BAG), "--method",
-                           METHOD, "--out", str(out), "--no-progress"],
-                          capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr
-    return np.loadtxt(out / "estimate.tum")
+    proc = subprocess.Popen([sys.executable, "-m", "lili_odom.cli", "run", str(BAG), "--method",
+                             METHOD, "--out", str(out), "--no-progress"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return proc, out / "estimate.tum"
+
+
+def _runner_trajectory(proc: subprocess.Popen, estimate: Path) -> np.ndarray:
+    try:
+        _, stderr = proc.communicate(timeout=600)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, stderr
+    return np.loadtxt(estimate)
 
 
 def test_node_over_dds_matches_offline_runner(tmp_path, monkeypatch):
-    expected = _runner_trajectory(tmp_path)
+    runner, estimate = _start_runner(tmp_path)
     env = isolated_ros_env()
     for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
         monkeypatch.setenv(key, env[key])
@@ -67,10 +76,12 @@ def test_node_over_dds_matches_offline_runner(tmp_path, monkeypatch):
                                "--rate", "1.0", "--delay", "20.0", "--qos-depth", "1000"],
                               env=env, capture_output=True, text=True, timeout=120)
         assert play.returncode == 0, play.stderr
+        expected = _runner_trajectory(runner, estimate)
         wait_for(lambda: len(got) >= len(expected), 120.0)
         time.sleep(0.5)
         diag = node.diagnostics()
     finally:
+        runner.kill()  # nothing after a normal exit; a runner left by a failure stops
         executor.shutdown(timeout_sec=2.0)
         spin.join(5.0)
         node.destroy_node()
