@@ -332,6 +332,33 @@ def test_constrained_directions_are_refined_where_point_to_plane_holds_them():
         PlaneRefinementConfig(refine_constrained="yes").validate()
 
 
+def test_only_directions_held_to_constrained_information_take_the_refined_step():
+    from dataclasses import replace
+
+    from lili_odom.degeneracy.result import DegeneracyResult
+
+    none = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0)
+    boxed = corridor(40.0, end_walls=True)  # far end walls: the axis is held, but weakly
+    pipeline = _pipeline_over(boxed, 19.9)
+    cfg = pipeline.config.plane_refinement
+    cfg.refine_constrained = "all"
+    off_by = pose_at(20.0)
+    off_by[:3, 3] += [0.08, 0.06, 0.0]
+    fits = planes(pipeline, scan_at(boxed, 20.0))
+    info = refine_in_subspace(fits.points, fits.reference, pose_at(20.0), np.eye(6)[:2], 10.0,
+                              replace(cfg, iterations=0), fits=fits.at(pose_at(20.0)))
+    along, across = np.diag(info.information)
+    assert 0 < along < 0.1 * across  # the axis is held, far less than across it
+    cfg.constrained_information = 0.5 * along
+    refined = pipeline._refine_constrained(fits, off_by, none)
+    assert abs(refined[0, 3] - 20.0) < 0.03 and abs(refined[1, 3]) < 0.02
+    cfg.constrained_information = float(np.sqrt(along * across))  # between the two
+    refined = pipeline._refine_constrained(fits, off_by, none)
+    assert abs(refined[0, 3] - 20.08) < 2e-3 and abs(refined[1, 3]) < 0.02
+    with pytest.raises(ValueError, match="constrained_information"):
+        PlaneRefinementConfig(constrained_information=0.0).validate()
+
+
 def test_closed_form_eigen_matches_numpy_on_planar_and_generic_neighbourhoods():
     from lili_odom.pipeline.plane_refinement import symmetric_eigen3
 

@@ -920,13 +920,13 @@ class OdometryPipeline:
                             degeneracy: DegeneracyResult) -> np.ndarray:
         """``pose`` refined by point-to-plane in the directions outside the degenerate
         subspace (all, or base_link's planar motion: ``plane_refinement.refine_constrained``)
-        that point-to-plane holds as well as a well-constrained one; ``pose`` itself when
-        there are none.
+        that point-to-plane holds with at least ``plane_refinement.constrained_information``;
+        ``pose`` itself when there are none.
 
         The refinement runs in all those directions at once; its information at the result
         (where the residuals no longer carry the registration's offset) tells which of them
-        are held with at least ``clear_information``, and only the step's part along those is
-        kept (scaled twists); along the others the registration stays.
+        are held that well, and only the step's part along those is kept (scaled twists);
+        along the others the registration stays.
         """
         cfg = self.config.plane_refinement
         if not cfg.enabled or cfg.refine_constrained == "off":
@@ -940,7 +940,7 @@ class OdometryPipeline:
         if not refined.ok:
             return pose
         w, V = np.linalg.eigh(0.5 * (refined.information + refined.information.T))
-        strong = w >= cfg.clear_information
+        strong = w >= cfg.constrained_information
         if not strong.any():
             return pose
         self.counters["constrained_refined"] += 1

@@ -95,9 +95,13 @@ class PlaneRefinementConfig:
             the along-track refinement counts as holding it (default 100: a 10 cm sigma).
         refine_constrained: after the checks above, refine the registration by point-to-plane
             in the directions outside the degenerate subspace that it holds with at least
-            ``clear_information`` (the planes of the checks, no extra nearest-neighbour
+            ``constrained_information`` (the planes of the checks, no extra nearest-neighbour
             query): ``off``, ``all`` (every such direction) or ``planar`` (only base_link's
             forward, lateral and yaw motion; default).
+        constrained_information: information [1/m^2] from which a direction outside the
+            degenerate subspace takes the point-to-plane refinement's step
+            (``refine_constrained``); along the others the registration's pose stays.
+            Default 2500 (a 2 cm sigma, as ``clear_information``).
         clear_information: a detected direction along which the refinement's information is
             at least this [1/m^2] is measured by the refined pose like a constrained one and
             removed from the degenerate subspace (default 2500: a 2 cm sigma, the configured
@@ -143,6 +147,7 @@ class PlaneRefinementConfig:
     min_along_information: float = 100.0
     clear_information: float = 2500.0
     refine_constrained: str = "planar"
+    constrained_information: float = 2500.0
     screen_detections: bool = True
     predicted_start: bool = True
     vertical_lines: bool = False
@@ -172,6 +177,8 @@ class PlaneRefinementConfig:
         check_range(prefix + "weak_information", self.weak_information, 0.0, 1e12)
         check_range(prefix + "min_along_information", self.min_along_information, 0.0, 1e12)
         check_range(prefix + "clear_information", self.clear_information, 0.0, 1e12)
+        check_range(prefix + "constrained_information", self.constrained_information, 0.0,
+                    1e12, lo_open=True)
         check_range(prefix + "min_linearity", self.min_linearity, 0.0, 1.0)
         check_range(prefix + "max_line_tilt_deg", self.max_line_tilt_deg, 0.0, 90.0, unit="deg")
         if self.refine_constrained not in REFINE_CONSTRAINED:
