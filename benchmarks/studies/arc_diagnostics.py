@@ -9,8 +9,9 @@
 *true* poses (the previous ``--history`` seconds of scans, each column placed with its true
 pose, so no deskew or odometry error enters). Whatever LiLi reports there is the detector's
 own answer for that place; anything more it reports in the odometry comes from the estimate.
-The map and scan go through the odometry's own ``ScanMatcher`` settings (voxel 1 m, 0.5/1.5
-voxel downsampling, ``detection_points`` thinning).
+The map and scan go through the odometry's own preprocessing with the true sweep motion
+(:mod:`lili_odom.evaluation.truth_map_detection`; ``benchmarks/false_detections.py`` uses the
+same judge on whole runs).
 
 ``jumps`` reads ``estimate.tum`` and ``truth.tum`` of a ``lili-odom run`` / ``evaluate`` run
 directory and counts scan-to-scan changes of the lateral position error (in the true body
@@ -38,59 +39,28 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from benchmarks._common import RESULTS
-from lili_odom import geometry
 from lili_odom.evaluation.run_diagnostics import error_table, jump_table, tilt_table
 
 DEFAULT_OUT = RESULTS / "arc_diagnostics.md"
 
 
 def probe(times: list[float], resolution: tuple[int, int], history: float) -> list[str]:
-    from kiss_icp.voxelization import voxel_down_sample
-
-    from lili_odom.degeneracy.lili import LiliDetector
-    from lili_odom.pipeline.odometry import PipelineConfig
-    from lili_odom.pipeline.scan_matcher import ScanMatcher
+    from lili_odom.evaluation.truth_map_detection import TruthMapDetector
     from lili_odom.sim.generator import SimRequest, Simulation
 
-    sim = Simulation(SimRequest(trial=1, resolution=resolution))
-    base_to_lidar = sim.sensors.extrinsics.base_to_lidar
-    period = sim.sensors.lidar.scan_period
-    cfg = PipelineConfig()
-
-    def scan_in_world(t_start: float) -> tuple[np.ndarray, np.ndarray]:
-        scan = sim.scan(t_start)
-        col_t = t_start + scan.t_ns.astype(float) * 1e-9
-        T = sim.trajectory.pose(col_t) @ base_to_lidar  # (cols, 4, 4) world <- os_lidar
-        xyz = scan.xyz.astype(float)
-        world = np.einsum("cij,rcj->rci", T[:, :3, :3], xyz) + T[None, :, :3, 3]
-        keep = np.all(np.isfinite(world), -1) & (np.linalg.norm(xyz, axis=-1) > cfg.scan_matcher.min_range)
-        return world[keep], sim.trajectory.pose(col_t[-1:])[0] @ base_to_lidar
-
+    judge = TruthMapDetector(Simulation(SimRequest(trial=1, resolution=resolution)),
+                             history_s=history)
     lines = [f"## LiLi on a map from the true poses (Trial 1, {resolution[0]}x{resolution[1]}, "
              f"{history:g} s of history)", "",
              "| t [s] | x [m] | points | L [m] | dimension | PCA eigenvalues | basis (scaled, v / L w) |",
              "|---|---|---|---|---|---|---|"]
-    detector = LiliDetector(cfg.lili)
     for t in times:
-        matcher = ScanMatcher(cfg.scan_matcher)
-        voxel = matcher.config.voxel
-        for k in range(int(round(history / period)), 0, -1):
-            world, T_end = scan_in_world(t - k * period)
-            local = geometry.transform_points(np.linalg.inv(T_end), world)
-            matcher.update_map(voxel_down_sample(local, 0.5 * voxel), T_end, np.eye(4))
-        world, T_end = scan_in_world(t)
-        local = geometry.transform_points(np.linalg.inv(T_end), world)
-        source = voxel_down_sample(voxel_down_sample(local, 0.5 * voxel), 1.5 * voxel)
-        n = cfg.detection_points
-        if n and len(source) > n:
-            source = source[:: int(np.ceil(len(source) / n))]
-        res = detector.detect(matcher.reference, source, T_end)
+        d = judge.detect(t)
+        res = d.result
         basis = "; ".join("(" + ", ".join(f"{v:+.2f}" for v in row) + ")" for row in res.basis_scaled)
         eig = ", ".join(f"{v:.2f}" for v in res.eigenvalues[:3]) if res.eigenvalues is not None else ""
-        lines.append(f"| {t:g} | {T_end[0, 3]:.1f} | {len(source)} | {res.characteristic_length:.1f} | "
+        lines.append(f"| {t:g} | {d.pose[0, 3]:.1f} | {d.points} | {res.characteristic_length:.1f} | "
                      f"{res.dimension} | {eig} | {basis or '-'} |")
         print(lines[-1], flush=True)
     return lines + [""]

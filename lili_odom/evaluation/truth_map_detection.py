@@ -1,0 +1,113 @@
+"""The odometry's detector on a local map built from the true poses of a simulated run.
+
+Each scan of the simulation is preprocessed exactly as the odometry preprocesses it
+(:meth:`~lili_odom.pipeline.scan_matcher.ScanMatcher.preprocess`: range filter, first point per
+0.5-voxel cell, KISS-ICP's deskew), but with the *true* sweep motion, and inserted into a
+KISS-ICP local map at its *true* pose; the scan under test is then handed to the configured
+detector (``PipelineConfig.method``, its ``detection_points`` thinning) with its true pose as
+the initial guess. No deskew, registration or fusion error enters, so what the detector
+reports there is its answer for the place: a scan the odometry flags where this finds dimension
+0 is a false detection of the odometry.
+
+Frames: ``world`` is the simulation's world frame, poses are ``T_world_lidar`` (os_lidar) at the
+time of a sweep's last column. Times are trial times [s] (the bag's stamps are
+``EPOCH_NS`` + trial time).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from lili_odom.degeneracy.result import DegeneracyResult
+from lili_odom.pipeline.odometry import PipelineConfig, make_detector
+from lili_odom.pipeline.scan_matcher import ScanMatcher
+from lili_odom.sim.generator import Simulation
+
+__all__ = ["TruthMapDetection", "TruthMapDetector"]
+
+
+@dataclass
+class TruthMapDetection:
+    """One scan's detection against the map from the true poses.
+
+    Attributes:
+        t_start: trial time of the scan's first column [s].
+        t_end: trial time of its last column [s] (the odometry's stamp of the scan).
+        pose: 4x4 true ``T_world_lidar`` at ``t_end``.
+        map_scans: scans in the local map (from ``history_s`` before the scan, not before the
+            simulation window).
+        points: scan points handed to the detector.
+        result: the detector's result (``result.dimension``: 0 = constrained).
+    """
+
+    t_start: float
+    t_end: float
+    pose: np.ndarray
+    map_scans: int
+    points: int
+    result: DegeneracyResult
+
+    @property
+    def dimension(self) -> int:
+        return int(self.result.dimension)
+
+
+class TruthMapDetector:
+    """Detections of a simulation's scans against local maps built from the true poses.
+
+    Args:
+        sim: the simulation (world, trajectory, sensors) of the run.
+        config: the odometry's parameters whose scan matcher, detector and
+            ``detection_points`` are used (default ``PipelineConfig()``; method ``none`` is
+            refused).
+        history_s: seconds of scans before the tested one that make up its local map
+            (default 3.0; every scan of that span, as the odometry inserts every scan).
+    """
+
+    def __init__(self, sim: Simulation, config: PipelineConfig | None = None,
+                 history_s: float = 3.0) -> None:
+        self.sim = sim
+        self.config = config or PipelineConfig()
+        self.history_s = float(history_s)
+        self.detector = make_detector(self.config)
+        if self.detector is None:
+            raise ValueError("a truth-map detection needs a detector (method is 'none')")
+        self._base_to_lidar = sim.sensors.extrinsics.base_to_lidar
+        self._period = sim.sensors.lidar.scan_period
+
+    def sweep(self, t_start: float, matcher: ScanMatcher) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(map points, source, pose) of the scan starting at ``t_start``: preprocessed by
+        ``matcher`` as the odometry does, with the true sweep motion, in the LiDAR frame at the
+        last column, and the true ``T_world_lidar`` there."""
+        scan = self.sim.scan(t_start)
+        col_t = t_start + np.asarray(scan.t_ns, dtype=float) * 1e-9
+        T_ends = self.sim.trajectory.pose(col_t[[0, -1]]) @ self._base_to_lidar
+        xyz = np.asarray(scan.xyz, dtype=float)
+        times = np.broadcast_to(col_t[None, :], xyz.shape[:2])
+        finite = np.all(np.isfinite(xyz), axis=-1)
+        sweep_motion = np.linalg.inv(T_ends[0]) @ T_ends[1]
+        map_points, source = matcher.preprocess(xyz[finite], times[finite], sweep_motion)
+        return np.asarray(map_points), np.asarray(source), T_ends[1]
+
+    def detect(self, t_start: float) -> TruthMapDetection:
+        """The detection of the scan starting at trial time ``t_start`` against a map of the
+        scans of the ``history_s`` before it (none before the simulation window)."""
+        matcher = ScanMatcher(self.config.scan_matcher)
+        window_start = self.sim.window()[0]
+        k_max = int(round(self.history_s / self._period))
+        starts = [t_start - k * self._period for k in range(k_max, 0, -1)]
+        starts = [t for t in starts if t >= window_start - 1e-9]
+        for t in starts:
+            map_points, _, T_end = self.sweep(t, matcher)
+            matcher.insert(map_points, T_end)
+        _, source, T_end = self.sweep(t_start, matcher)
+        n = self.config.detection_points
+        if n and len(source) > n:
+            source = source[:: int(np.ceil(len(source) / n))]
+        if matcher.map_empty:
+            raise ValueError(f"no scan before {t_start:.2f} s in the window: nothing to detect against")
+        result = self.detector.detect(matcher.reference, source, T_end)
+        t_end = float(t_start + np.max(self.sim.lidar.column_times()))
+        return TruthMapDetection(t_start=float(t_start), t_end=t_end, pose=T_end,
+                                 map_scans=len(starts), points=len(source), result=result)

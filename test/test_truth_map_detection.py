@@ -1,0 +1,38 @@
+"""The detector against a local map from the true poses (the judge of false detections)."""
+import numpy as np
+import pytest
+
+from lili_odom.evaluation.truth_map_detection import TruthMapDetector
+from lili_odom.pipeline.odometry import PipelineConfig
+from lili_odom.sim.generator import SimRequest, Simulation
+
+
+def _judge(world: str, **kwargs) -> TruthMapDetector:
+    sim = Simulation(SimRequest(world=world, trial=1, resolution=(32, 256)))
+    return TruthMapDetector(sim, history_s=1.0, **kwargs)
+
+
+def test_constrained_hall_has_dimension_zero():
+    """In the building's hall (pillars, cars, crates) the detector finds nothing."""
+    d = _judge("building").detect(8.0)
+    assert d.map_scans == 10 and d.points > 100
+    assert d.dimension == 0
+    assert d.t_end == pytest.approx(8.0 + 0.1 * 255 / 256)
+
+
+def test_bare_tunnel_is_degenerate_along_its_axis():
+    """50 m inside the straight bare tunnel the axis (world x, the LiDAR's forward) is free."""
+    judge = _judge("long_tunnel")
+    d = judge.detect(60.0)
+    assert d.pose[0, 3] > 40.0
+    assert d.dimension == 1
+    axis = d.result.basis_scaled[0] / np.linalg.norm(d.result.basis_scaled[0])
+    assert abs(axis[0]) > 0.95
+
+
+def test_refuses_what_it_cannot_judge():
+    with pytest.raises(ValueError, match="needs a detector"):
+        _judge("building", config=PipelineConfig(method="none"))
+    judge = _judge("building")
+    with pytest.raises(ValueError, match="nothing to detect against"):
+        judge.detect(judge.sim.window()[0])
