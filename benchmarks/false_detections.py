@@ -14,8 +14,10 @@ the previous ``--history`` seconds of scans placed at their *true* poses and des
 true motion (:mod:`lili_odom.evaluation.truth_map_detection`). A sample with dimension 0 marks
 a constrained place; every scan of the run belongs to its nearest sample. Reported per run:
 the share of the scans in constrained places that the odometry flagged (the issue's target:
-at most 5 %), split into standstill and driving (true speed below/above 0.05 m/s), and the
-share of the scans in places the judge finds degenerate that the odometry flagged too.
+at most 5 %), split into standstill and driving (true speed below/above 0.05 m/s) and, where
+``scans.csv`` says which directions the weak-direction check added, the detector's share
+alone; and the share of the scans in places the judge finds degenerate that the odometry
+flagged too.
 
 Writes ``OUT/false_detections.{md,json}`` and ``false_detections.png`` (default OUT:
 ``benchmarks/results/false_detections``). Costs about one second per sample at 32 x 512
@@ -39,13 +41,18 @@ TARGET = 0.05
 """Largest share of the scans in constrained places the odometry may flag."""
 
 
-def _odometry_flags(scans_csv: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(stamps [s], dimension per scan) of a run's ``scans.csv``."""
+def _odometry_flags(scans_csv: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(stamps [s], dimension per scan, the detector's part of it or None) of a run's
+    ``scans.csv``; the detector's part is the dimension less the weak directions the
+    odometry added (column ``weak_directions``, absent in older runs)."""
     with open(scans_csv, newline="") as f:
         rows = list(csv.DictReader(f))
     stamps = np.array([float(r["stamp"]) for r in rows])
     dims = np.array([int(float(r["dimension"])) for r in rows])
-    return stamps, dims
+    if rows and "weak_directions" in rows[0]:
+        weak = np.array([int(float(r["weak_directions"])) for r in rows])
+        return stamps, dims, np.maximum(dims - weak, 0)
+    return stamps, dims, None
 
 
 def _share(flags: np.ndarray) -> float | None:
@@ -61,7 +68,7 @@ def judge_run(scenario, seed: int, scans_csv: Path, resolution, every: float,
 
     sim = Simulation(scenario_request(scenario, seed, resolution=resolution))
     judge = TruthMapDetector(sim, history_s=history)
-    stamps, dims = _odometry_flags(scans_csv)
+    stamps, dims, detected = _odometry_flags(scans_csv)
     t_scans = stamps - EPOCH_NS * 1e-9  # trial time of each scan's last column
     starts = sim.scan_starts()
     first = starts[0] + history
@@ -94,6 +101,8 @@ def judge_run(scenario, seed: int, scans_csv: Path, resolution, every: float,
         "false_share": _share(flagged[constrained]),
         "false_share_standstill": _share(flagged[constrained & still]),
         "false_share_driving": _share(flagged[constrained & ~still]),
+        "false_share_detector": (None if detected is None
+                                 else _share(detected[constrained] > 0)),
         "scans_degenerate": int(np.sum(degenerate)),
         "flag_share_degenerate": _share(flagged[degenerate]),
         "series": {"distance_m": travelled.round(2).tolist(), "odometry_dim": dims.tolist(),
@@ -129,17 +138,21 @@ def markdown(rows: list[dict], command: str) -> str:
              "(`lili_odom/evaluation/truth_map_detection.py`). Constrained scans: those whose "
              "nearest sample the judge finds of dimension 0. False: the share of them the "
              f"odometry flagged (target at most {TARGET:.0%}); standstill below "
-             f"{STANDSTILL_SPEED} m/s true speed. Last column: the share of the scans in "
-             "places the judge finds degenerate that the odometry flagged too.", "",
+             f"{STANDSTILL_SPEED} m/s true speed; 'detector': the share flagged by the "
+             "detection alone, without the directions the weak-direction check added "
+             "(`plane_refinement.weak_information`; the LiDAR's information along those is "
+             "kept). Last column: the share of the scans in places the judge finds degenerate "
+             "that the odometry flagged too.", "",
              "| scenario | seed | samples (constrained) | constrained scans | false | "
-             "false at standstill | false driving | degenerate scans | flagged there |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "false at standstill | false driving | false, detector | degenerate scans | "
+             "flagged there |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(
             f"| {r['scenario']} | {r['seed']} | {r['samples']} ({r['samples_constrained']}) | "
             f"{r['scans_constrained']} | {_pct(r['false_share'])} | "
             f"{_pct(r['false_share_standstill'])} | {_pct(r['false_share_driving'])} | "
-            f"{r['scans_degenerate']} | {_pct(r['flag_share_degenerate'])} |")
+            f"{_pct(r.get('false_share_detector'))} | {r['scans_degenerate']} | {_pct(r['flag_share_degenerate'])} |")
     total_c = sum(r["scans_constrained"] for r in rows)
     if total_c:
         false_all = sum((r["false_share"] or 0.0) * r["scans_constrained"] for r in rows) / total_c

@@ -29,6 +29,22 @@ def test_run_none_tracks_the_truth_and_writes_every_output(tmp_path, capsys):
     assert len(scans) == result["scans_processed"]
     # the online wheel distance scale per scan: 1 until calibrated, always within its range
     assert np.all((scans["wheel_scale"] >= 0.8) & (scans["wheel_scale"] <= 1.25))
+    # without a detector no scan has a subspace, so none has one of its origins
+    for name in ("weak_directions", "reused", "screened"):
+        assert np.all(scans[name] == 0), name
+
+
+def test_scan_rows_say_where_the_subspace_came_from():
+    from lili_odom.degeneracy.result import DegeneracyResult
+    from lili_odom.evaluation.runner import _origin
+
+    assert _origin(None) == (0, 0, 0)
+    det = DegeneracyResult(method="lili", pose=np.eye(4), basis_scaled=np.eye(6)[:3],
+                           characteristic_length=10.0, details={"weak": 2, "reused": True})
+    assert _origin(det) == (2, 1, 0)
+    screened = DegeneracyResult(method="lili", pose=np.eye(4), basis_scaled=np.zeros((0, 6)),
+                                characteristic_length=10.0, details={"screened": True})
+    assert _origin(screened) == (0, 0, 1)
 
 
 def test_run_missing_bag_is_a_one_line_error(tmp_path, capsys):

@@ -12,7 +12,11 @@ order through the replay loop (:class:`~lili_odom.evaluation.replay.Replay`: the
   (base_link in the odometry frame, quaternion ``icp_qx .. icp_qw``; the fused one is in
   ``estimate.tum``), the estimated IMU biases (``accel_bias_*`` [m/s^2], ``gyro_bias_*``
   [rad/s], IMU frame) and the tracked gravity's rotation about the odometry frame's x and y
-  (``gravity_tilt_x/y`` [rad], ``fusion.gravity_tracking_gain``);
+  (``gravity_tilt_x/y`` [rad], ``fusion.gravity_tracking_gain``), and how the scan's subspace
+  came about: ``weak_directions`` (directions of planar motion the weak-direction check added to
+  the detector's, ``plane_refinement.weak_information``), ``reused`` (1 when a recent detection
+  served the scan) and ``screened`` (1 when the planes held every direction and the detector
+  was not asked);
 * ``metrics.json``: ATE / RPE (via ``evo``, when there is truth), degeneracy statistics,
   counters, mean per-stage timings, throughput;
 * ``trajectory.png``: top view of the estimate (degenerate scans marked) and the truth.
@@ -69,6 +73,15 @@ class OfflineRun:
         i = int(np.argmin(np.abs(stamps - self.estimates[0][0])))
         T_align = self.estimates[0][1] @ np.linalg.inv(self.truth[i][1])
         return np.array([(T_align @ T)[:3, 3] for _, T in self.truth])
+
+
+def _origin(det) -> tuple[int, int, int]:
+    """(weak directions added, reused, screened) of a scan's degeneracy result (zeros without
+    one)."""
+    if det is None:
+        return 0, 0, 0
+    d = det.details
+    return int(d.get("weak", 0)), int(bool(d.get("reused"))), int(bool(d.get("screened")))
 
 
 def _quaternion(T: np.ndarray | None) -> list[float]:
@@ -155,7 +168,8 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
                          *_quaternion(out.icp_pose),
                          *_vector(out.details.get("accel_bias")),
                          *_vector(out.details.get("gyro_bias")),
-                         *_vector(out.details.get("gravity_tilt"), 2)])
+                         *_vector(out.details.get("gravity_tilt"), 2),
+                         *_origin(det)])
             writer.write_output(out)
             if accumulator is not None and out.stamp - last_accumulated[0] >= 1.0:
                 accumulator.add(pipeline.local_map_points())
@@ -195,7 +209,7 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
         w.writerow(["stamp", "dimension", "x", "y", "z", *(f"{k}_s" for k in STAGES),
                     "wheel_scale", "icp_qx", "icp_qy", "icp_qz", "icp_qw",
                     *(f"accel_bias_{a}" for a in "xyz"), *(f"gyro_bias_{a}" for a in "xyz"),
-                    "gravity_tilt_x", "gravity_tilt_y"])
+                    "gravity_tilt_x", "gravity_tilt_y", "weak_directions", "reused", "screened"])
         w.writerows(rows)
     dims = np.asarray(run.dimensions)
     summary: dict = {
