@@ -36,3 +36,12 @@ def test_refuses_what_it_cannot_judge():
     judge = _judge("building")
     with pytest.raises(ValueError, match="nothing to detect against"):
         judge.detect(judge.sim.window()[0])
+
+
+def test_constrained_stretches_need_consecutive_samples():
+    from benchmarks.false_detections import stretch_mask
+
+    c = np.array([1, 0, 1, 1, 1, 0, 1, 1, 0, 1, 1, 1, 1], dtype=bool)
+    expected = np.array([0, 0, 1, 1, 1, 0, 0, 0, 0, 1, 1, 1, 1], dtype=bool)
+    np.testing.assert_array_equal(stretch_mask(c, 3), expected)
+    assert not stretch_mask(np.zeros(4, dtype=bool)).any()
