@@ -45,3 +45,28 @@ def test_constrained_stretches_need_consecutive_samples():
     expected = np.array([0, 0, 1, 1, 1, 0, 0, 0, 0, 1, 1, 1, 1], dtype=bool)
     np.testing.assert_array_equal(stretch_mask(c, 3), expected)
     assert not stretch_mask(np.zeros(4, dtype=bool)).any()
+
+
+def test_placement_moves_the_map_and_the_guess():
+    """Scans placed by another frame's poses (here the truth moved rigidly) give the same
+    answer; a scan the placement has no pose for is left out of the map, or refused when it
+    is the tested one."""
+    sim = Simulation(SimRequest(world="building", trial=1, resolution=(32, 256)))
+    shift = np.eye(4)
+    shift[:3, 3] = [5.0, -3.0, 1.0]
+
+    def shifted(t):
+        return shift @ sim.trajectory.pose(np.array([t]))[0]
+
+    d = TruthMapDetector(sim, history_s=1.0, placement=shifted).detect(8.0)
+    assert d.dimension == 0
+    np.testing.assert_allclose(d.pose[:3, 3] - shift[:3, 3],
+                               (sim.trajectory.pose(np.array([d.t_end]))[0]
+                                @ sim.sensors.extrinsics.base_to_lidar)[:3, 3], atol=1e-9)
+
+    def gap(t):
+        return None if 7.5 < t < 7.95 else shifted(t)
+
+    assert TruthMapDetector(sim, history_s=1.0, placement=gap).detect(8.0).map_scans < 10
+    with pytest.raises(ValueError, match="no placement"):
+        TruthMapDetector(sim, history_s=1.0, placement=lambda t: None).detect(8.0)

@@ -7,7 +7,8 @@ KISS-ICP local map at its *true* pose; the scan under test is then handed to the
 detector (``PipelineConfig.method``, its ``detection_points`` thinning) with its true pose as
 the initial guess. No deskew, registration or fusion error enters, so what the detector
 reports there is its answer for the place: a scan the odometry flags where this finds dimension
-0 is a false detection of the odometry.
+0 is a false detection of the odometry. With a ``placement`` (e.g. a run's estimated poses) the
+same map is built where the odometry put the scans instead, which shows what its drift does.
 
 Frames: ``world`` is the simulation's world frame, poses are ``T_world_lidar`` (os_lidar) at the
 time of a sweep's last column. Times are trial times [s] (the bag's stamps are
@@ -16,6 +17,7 @@ time of a sweep's last column. Times are trial times [s] (the bag's stamps are
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -34,7 +36,7 @@ class TruthMapDetection:
     Attributes:
         t_start: trial time of the scan's first column [s].
         t_end: trial time of its last column [s] (the odometry's stamp of the scan).
-        pose: 4x4 true ``T_world_lidar`` at ``t_end``.
+        pose: 4x4 ``T_world_lidar`` at ``t_end`` (true, or the placement's ``T_frame_lidar``).
         map_scans: scans in the local map (from ``history_s`` before the scan, not before the
             simulation window).
         points: scan points handed to the detector.
@@ -63,13 +65,21 @@ class TruthMapDetector:
             refused).
         history_s: seconds of scans before the tested one that make up its local map
             (default 3.0; every scan of that span, as the odometry inserts every scan).
+        placement: ``f(t)`` -> 4x4 ``T_frame_base`` at trial time ``t`` (a sweep's last
+            column), or None where there is none: where the scans are inserted and the tested
+            one is guessed instead of their true poses (e.g. a run's estimate, to see what its
+            drift does to the map); the sweeps are still deskewed with the true motion.
+            Default None: the true poses. A scan without a placement is left out of the map
+            (the tested one raises ``ValueError``).
     """
 
     def __init__(self, sim: Simulation, config: PipelineConfig | None = None,
-                 history_s: float = 3.0) -> None:
+                 history_s: float = 3.0,
+                 placement: Callable[[float], np.ndarray | None] | None = None) -> None:
         self.sim = sim
         self.config = config or PipelineConfig()
         self.history_s = float(history_s)
+        self.placement = placement
         self.detector = make_detector(self.config)
         if self.detector is None:
             raise ValueError("a truth-map detection needs a detector (method is 'none')")
@@ -79,7 +89,8 @@ class TruthMapDetector:
     def sweep(self, t_start: float, matcher: ScanMatcher) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(map points, source, pose) of the scan starting at ``t_start``: preprocessed by
         ``matcher`` as the odometry does, with the true sweep motion, in the LiDAR frame at the
-        last column, and the true ``T_world_lidar`` there."""
+        last column, and ``T_frame_lidar`` there (true, or from ``placement``; None when the
+        placement has none)."""
         scan = self.sim.scan(t_start)
         col_t = t_start + np.asarray(scan.t_ns, dtype=float) * 1e-9
         T_ends = self.sim.trajectory.pose(col_t[[0, -1]]) @ self._base_to_lidar
@@ -88,7 +99,11 @@ class TruthMapDetector:
         finite = np.all(np.isfinite(xyz), axis=-1)
         sweep_motion = np.linalg.inv(T_ends[0]) @ T_ends[1]
         map_points, source = matcher.preprocess(xyz[finite], times[finite], sweep_motion)
-        return np.asarray(map_points), np.asarray(source), T_ends[1]
+        pose = T_ends[1]
+        if self.placement is not None:
+            T_base = self.placement(float(col_t[-1]))
+            pose = None if T_base is None else np.asarray(T_base) @ self._base_to_lidar
+        return np.asarray(map_points), np.asarray(source), pose
 
     def detect(self, t_start: float) -> TruthMapDetection:
         """The detection of the scan starting at trial time ``t_start`` against a map of the
@@ -98,10 +113,15 @@ class TruthMapDetector:
         k_max = int(round(self.history_s / self._period))
         starts = [t_start - k * self._period for k in range(k_max, 0, -1)]
         starts = [t for t in starts if t >= window_start - 1e-9]
+        inserted = 0
         for t in starts:
             map_points, _, T_end = self.sweep(t, matcher)
-            matcher.insert(map_points, T_end)
+            if T_end is not None:
+                matcher.insert(map_points, T_end)
+                inserted += 1
         _, source, T_end = self.sweep(t_start, matcher)
+        if T_end is None:
+            raise ValueError(f"no placement for the scan at {t_start:.2f} s")
         n = self.config.detection_points
         if n and len(source) > n:
             source = source[:: int(np.ceil(len(source) / n))]
@@ -110,4 +130,4 @@ class TruthMapDetector:
         result = self.detector.detect(matcher.reference, source, T_end)
         t_end = float(t_start + np.max(self.sim.lidar.column_times()))
         return TruthMapDetection(t_start=float(t_start), t_end=t_end, pose=T_end,
-                                 map_scans=len(starts), points=len(source), result=result)
+                                 map_scans=inserted, points=len(source), result=result)
