@@ -169,10 +169,6 @@ def markdown(rows: list[dict], command: str) -> str:
              "constrained (a single constrained sample between degenerate ones is often a "
              "feature passing by, which a detection that serves several scans cannot follow).",
              "",
-             f"Stretches: runs of at least {STRETCH_SAMPLES} consecutive samples the judge finds "
-             "constrained (a single constrained sample between degenerate ones is often a "
-             "feature passing by, which a detection that serves several scans cannot follow).",
-             "",
              "| scenario | seed | samples (constrained) | constrained scans | false | "
              "false at standstill | false driving | false, detector | "
              f"scans on stretches of {STRETCH_SAMPLES}+ samples | false there | "

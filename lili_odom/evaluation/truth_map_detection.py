@@ -56,7 +56,8 @@ class TruthMapDetection:
 
 
 class TruthMapDetector:
-    """Detections of a simulation's scans against local maps built from the true poses.
+    """Detections of a simulation's scans against local maps built from the true poses (or
+    from ``placement``).
 
     Args:
         sim: the simulation (world, trajectory, sensors) of the run.
@@ -86,7 +87,8 @@ class TruthMapDetector:
         self._base_to_lidar = sim.sensors.extrinsics.base_to_lidar
         self._period = sim.sensors.lidar.scan_period
 
-    def sweep(self, t_start: float, matcher: ScanMatcher) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def sweep(self, t_start: float,
+              matcher: ScanMatcher) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """(map points, source, pose) of the scan starting at ``t_start``: preprocessed by
         ``matcher`` as the odometry does, with the true sweep motion, in the LiDAR frame at the
         last column, and ``T_frame_lidar`` there (true, or from ``placement``; None when the
