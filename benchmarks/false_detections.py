@@ -21,8 +21,8 @@ samples); and the share of the scans in places the judge finds degenerate that t
 flagged too.
 
 Writes ``OUT/false_detections.{md,json}`` and ``false_detections.png`` (default OUT:
-``benchmarks/results/false_detections``). Costs about one second per sample at 32 x 512
-(the map's scans are simulated again).
+``benchmarks/results/false_detections``). Every sweep of the judged span is simulated once
+(maps of overlapping samples share their scans).
 """
 from __future__ import annotations
 
@@ -60,7 +60,7 @@ def stretch_mask(constrained: np.ndarray, n: int = STRETCH_SAMPLES) -> np.ndarra
     return out
 
 
-def _odometry_flags(scans_csv: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def odometry_flags(scans_csv: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """(stamps [s], dimension per scan, the detector's part of it or None) of a run's
     ``scans.csv``; the detector's part is the dimension less the weak directions the
     odometry added (column ``weak_directions``, absent in older runs)."""
@@ -87,13 +87,12 @@ def judge_run(scenario, seed: int, scans_csv: Path, resolution, every: float,
 
     sim = Simulation(scenario_request(scenario, seed, resolution=resolution))
     judge = TruthMapDetector(sim, history_s=history)
-    stamps, dims, detected = _odometry_flags(scans_csv)
+    stamps, dims, detected = odometry_flags(scans_csv)
     t_scans = stamps - EPOCH_NS * 1e-9  # trial time of each scan's last column
     starts = sim.scan_starts()
     first = starts[0] + history
-    sample_starts = [t for t in np.arange(first, starts[-1] + 1e-9, every)]
     samples = []
-    for t in sample_starts:
+    for t in np.arange(first, starts[-1] + 1e-9, every):
         t = float(starts[np.argmin(np.abs(starts - t))])
         try:
             d = judge.detect(t)

@@ -58,7 +58,8 @@ def test_placement_moves_the_map_and_the_guess():
     def shifted(t):
         return shift @ sim.trajectory.pose(np.array([t]))[0]
 
-    d = TruthMapDetector(sim, history_s=1.0, placement=shifted).detect(8.0)
+    judge = TruthMapDetector(sim, history_s=1.0)
+    d = judge.detect(8.0, placement=shifted)
     assert d.dimension == 0
     np.testing.assert_allclose(d.pose[:3, 3] - shift[:3, 3],
                                (sim.trajectory.pose(np.array([d.t_end]))[0]
@@ -67,6 +68,8 @@ def test_placement_moves_the_map_and_the_guess():
     def gap(t):
         return None if 7.5 < t < 7.95 else shifted(t)
 
-    assert TruthMapDetector(sim, history_s=1.0, placement=gap).detect(8.0).map_scans < 10
+    assert judge.detect(8.0, placement=gap).map_scans < 10
     with pytest.raises(ValueError, match="no placement"):
-        TruthMapDetector(sim, history_s=1.0, placement=lambda t: None).detect(8.0)
+        judge.detect(8.0, placement=lambda t: None)
+    assert judge.detect(8.0).map_scans == 10  # the true poses again, from the kept sweeps
+    assert len(judge._sweeps) <= 11

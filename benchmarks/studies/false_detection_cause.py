@@ -19,7 +19,6 @@ does. Appends a section to ``benchmarks/results/false_detection_cause.md`` (``--
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 from pathlib import Path
 
@@ -48,14 +47,14 @@ def estimate_placement(run_dir: Path, epoch_s: float):
 
 def odometry_dimension(run_dir: Path, epoch_s: float):
     """``f(trial time)`` -> the subspace dimension the odometry used at that scan (or None)."""
-    with open(run_dir / "scans.csv", newline="") as f:
-        rows = list(csv.DictReader(f))
-    t = np.array([float(r["stamp"]) for r in rows]) - epoch_s
-    dims = [int(float(r["dimension"])) for r in rows]
+    from benchmarks.false_detections import odometry_flags
+
+    stamps, dims, _ = odometry_flags(run_dir / "scans.csv")
+    t = stamps - epoch_s
 
     def dim(tq: float):
         i = int(np.argmin(np.abs(t - tq)))
-        return dims[i] if abs(t[i] - tq) <= MAX_STAMP_GAP_S else None
+        return int(dims[i]) if abs(t[i] - tq) <= MAX_STAMP_GAP_S else None
 
     return dim
 
@@ -72,9 +71,8 @@ def study(runs: Path, scenario_name: str, seed: int, resolution: str | None, eve
     scenario = load_scenarios([scenario_name], measure=False)[0]
     sim = Simulation(scenario_request(scenario, seed, resolution=resolution))
     epoch_s = EPOCH_NS * 1e-9
-    truth_judge = TruthMapDetector(sim, history_s=history)
-    est_judge = TruthMapDetector(sim, history_s=history,
-                                 placement=estimate_placement(run_dir, epoch_s))
+    judge = TruthMapDetector(sim, history_s=history)
+    placement = estimate_placement(run_dir, epoch_s)
     odometry = odometry_dimension(run_dir, epoch_s)
     starts = sim.scan_starts()
     lines = [f"## {scenario_name}, seed {seed} ({resolution or 'own sensor'}, every {every:g} s, "
@@ -84,8 +82,8 @@ def study(runs: Path, scenario_name: str, seed: int, resolution: str | None, eve
     for tq in np.arange(starts[0] + history, starts[-1] + 1e-9, every):
         t = float(starts[np.argmin(np.abs(starts - tq))])
         try:
-            truth = truth_judge.detect(t)
-            est = est_judge.detect(t)
+            truth = judge.detect(t)
+            est = judge.detect(t, placement=placement)
         except ValueError as exc:
             print(f"  t={t:.1f} s skipped: {exc}", file=sys.stderr)
             continue

@@ -57,7 +57,10 @@ class TruthMapDetection:
 
 class TruthMapDetector:
     """Detections of a simulation's scans against local maps built from the true poses (or
-    from ``placement``).
+    from a ``placement``).
+
+    Each sweep is simulated and preprocessed once: the last ``history_s`` worth of them is
+    kept, so samples whose maps overlap share their scans.
 
     Args:
         sim: the simulation (world, trajectory, sensors) of the run.
@@ -66,70 +69,84 @@ class TruthMapDetector:
             refused).
         history_s: seconds of scans before the tested one that make up its local map
             (default 3.0; every scan of that span, as the odometry inserts every scan).
-        placement: ``f(t)`` -> 4x4 ``T_frame_base`` at trial time ``t`` (a sweep's last
-            column), or None where there is none: where the scans are inserted and the tested
-            one is guessed instead of their true poses (e.g. a run's estimate, to see what its
-            drift does to the map); the sweeps are still deskewed with the true motion.
-            Default None: the true poses. A scan without a placement is left out of the map
-            (the tested one raises ``ValueError``).
     """
 
     def __init__(self, sim: Simulation, config: PipelineConfig | None = None,
-                 history_s: float = 3.0,
-                 placement: Callable[[float], np.ndarray | None] | None = None) -> None:
+                 history_s: float = 3.0) -> None:
         self.sim = sim
         self.config = config or PipelineConfig()
         self.history_s = float(history_s)
-        self.placement = placement
         self.detector = make_detector(self.config)
         if self.detector is None:
             raise ValueError("a truth-map detection needs a detector (method is 'none')")
         self._base_to_lidar = sim.sensors.extrinsics.base_to_lidar
         self._period = sim.sensors.lidar.scan_period
+        self._history_scans = int(round(self.history_s / self._period))
+        self._preprocessor = ScanMatcher(self.config.scan_matcher)
+        self._sweeps: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, float]] = {}
 
-    def sweep(self, t_start: float,
-              matcher: ScanMatcher) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """(map points, source, pose) of the scan starting at ``t_start``: preprocessed by
-        ``matcher`` as the odometry does, with the true sweep motion, in the LiDAR frame at the
-        last column, and ``T_frame_lidar`` there (true, or from ``placement``; None when the
-        placement has none)."""
-        scan = self.sim.scan(t_start)
-        col_t = t_start + np.asarray(scan.t_ns, dtype=float) * 1e-9
-        T_ends = self.sim.trajectory.pose(col_t[[0, -1]]) @ self._base_to_lidar
-        xyz = np.asarray(scan.xyz, dtype=float)
-        times = np.broadcast_to(col_t[None, :], xyz.shape[:2])
-        finite = np.all(np.isfinite(xyz), axis=-1)
-        sweep_motion = np.linalg.inv(T_ends[0]) @ T_ends[1]
-        map_points, source = matcher.preprocess(xyz[finite], times[finite], sweep_motion)
-        pose = T_ends[1]
-        if self.placement is not None:
-            T_base = self.placement(float(col_t[-1]))
-            pose = None if T_base is None else np.asarray(T_base) @ self._base_to_lidar
-        return np.asarray(map_points), np.asarray(source), pose
+    def sweep(self, t_start: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """(map points, source, true ``T_world_lidar``, trial time) of the scan starting at
+        ``t_start``, all at its last column: preprocessed as the odometry does, with the true
+        sweep motion, in the LiDAR frame there."""
+        k = int(round(t_start / self._period))
+        if k not in self._sweeps:
+            scan = self.sim.scan(t_start)
+            col_t = t_start + np.asarray(scan.t_ns, dtype=float) * 1e-9
+            T_ends = self.sim.trajectory.pose(col_t[[0, -1]]) @ self._base_to_lidar
+            xyz = np.asarray(scan.xyz, dtype=float)
+            times = np.broadcast_to(col_t[None, :], xyz.shape[:2])
+            finite = np.all(np.isfinite(xyz), axis=-1)
+            sweep_motion = np.linalg.inv(T_ends[0]) @ T_ends[1]
+            map_points, source = self._preprocessor.preprocess(xyz[finite], times[finite],
+                                                               sweep_motion)
+            for old in [j for j in self._sweeps if j < k - self._history_scans]:
+                del self._sweeps[old]
+            self._sweeps[k] = (np.asarray(map_points), np.asarray(source), T_ends[1],
+                               float(col_t[-1]))
+        return self._sweeps[k]
 
-    def detect(self, t_start: float) -> TruthMapDetection:
+    def _pose(self, t_start: float, placement) -> np.ndarray | None:
+        """``T_frame_lidar`` of the scan starting at ``t_start``: true, or from ``placement``
+        (None when it has none)."""
+        _, _, T_true, t_end = self.sweep(t_start)
+        if placement is None:
+            return T_true
+        T_base = placement(t_end)
+        return None if T_base is None else np.asarray(T_base) @ self._base_to_lidar
+
+    def detect(self, t_start: float,
+               placement: Callable[[float], np.ndarray | None] | None = None) -> TruthMapDetection:
         """The detection of the scan starting at trial time ``t_start`` against a map of the
-        scans of the ``history_s`` before it (none before the simulation window)."""
+        scans of the ``history_s`` before it (none before the simulation window).
+
+        ``placement``: ``f(t)`` -> 4x4 ``T_frame_base`` at trial time ``t`` (a sweep's last
+        column), or None where there is none: where the scans are inserted and the tested one
+        is guessed instead of their true poses (e.g. a run's estimate, to see what its drift
+        does to the map); the sweeps are still deskewed with the true motion. Default None:
+        the true poses. A scan without a placement is left out of the map (the tested one
+        raises ``ValueError``).
+        """
         matcher = ScanMatcher(self.config.scan_matcher)
         window_start = self.sim.window()[0]
-        k_max = int(round(self.history_s / self._period))
-        starts = [t_start - k * self._period for k in range(k_max, 0, -1)]
-        starts = [t for t in starts if t >= window_start - 1e-9]
+        starts = [t_start - k * self._period for k in range(self._history_scans, 0, -1)]
         inserted = 0
         for t in starts:
-            map_points, _, T_end = self.sweep(t, matcher)
-            if T_end is not None:
-                matcher.insert(map_points, T_end)
+            if t < window_start - 1e-9:
+                continue
+            pose = self._pose(t, placement)
+            if pose is not None:
+                matcher.insert(self.sweep(t)[0], pose)
                 inserted += 1
-        _, source, T_end = self.sweep(t_start, matcher)
+        _, source, _, t_end = self.sweep(t_start)
+        T_end = self._pose(t_start, placement)
         if T_end is None:
             raise ValueError(f"no placement for the scan at {t_start:.2f} s")
+        if matcher.map_empty:
+            raise ValueError(f"no scan before {t_start:.2f} s in the window: nothing to detect against")
         n = self.config.detection_points
         if n and len(source) > n:
             source = source[:: int(np.ceil(len(source) / n))]
-        if matcher.map_empty:
-            raise ValueError(f"no scan before {t_start:.2f} s in the window: nothing to detect against")
         result = self.detector.detect(matcher.reference, source, T_end)
-        t_end = float(t_start + np.max(self.sim.lidar.column_times()))
         return TruthMapDetection(t_start=float(t_start), t_end=t_end, pose=T_end,
                                  map_scans=inserted, points=len(source), result=result)
