@@ -101,11 +101,11 @@ class PlaneRefinementConfig:
         constrained_information: information [1/m^2] from which a direction outside the
             degenerate subspace takes the point-to-plane refinement's step
             (``refine_constrained``); along the others the registration's pose stays.
-            Default 2500 (a 2 cm sigma, as ``clear_information``).
+            Default 1000 (a 3 cm sigma, as ``weak_information``).
         clear_information: a detected direction along which the refinement's information is
             at least this [1/m^2] is measured by the refined pose like a constrained one and
-            removed from the degenerate subspace (default 2500: a 2 cm sigma, the configured
-            LiDAR translation sigma); 0 = never.
+            removed from the degenerate subspace (default 1000: a 3 cm sigma, as
+            ``weak_information``); 0 = never.
         screen_detections: skip the degeneracy detector on a scan whose registration the
             planes hold in every direction with at least ``clear_information`` (the debiased
             point-to-plane information over all six scaled twists, from the planes the checks
@@ -145,9 +145,9 @@ class PlaneRefinementConfig:
     min_along_share: float = 0.5
     weak_information: float = 1000.0
     min_along_information: float = 100.0
-    clear_information: float = 2500.0
+    clear_information: float = 1000.0
     refine_constrained: str = "planar"
-    constrained_information: float = 2500.0
+    constrained_information: float = 1000.0
     screen_detections: bool = True
     predicted_start: bool = True
     vertical_lines: bool = False
