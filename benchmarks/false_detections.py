@@ -1,7 +1,7 @@
 """False detections of the odometry: its degenerate flags where the place is constrained.
 
     python -m benchmarks.false_detections --runs DIR/runs [--scenarios NAME...] \\
-        [--resolution 32x512] [--every 2.0] [--history 3.0] [--out DIR]
+        [--resolution 32x512] [--every 2.0] [--history 3.0|map] [--out DIR]
 
 ``--runs`` is the ``runs`` directory of a ``lili-odom suite`` (or ``python -m
 benchmarks.tuning``) output: ``RUNS/<scenario>/seed<k>/lili/scans.csv`` holds the subspace
@@ -11,7 +11,9 @@ simulated at (default: each scenario's own sensor).
 Every ``--every`` seconds of the run (from ``--history`` after its start) one scan is the
 judge's sample: the odometry's own detector runs on it against a KISS-ICP local map made of
 the previous ``--history`` seconds of scans placed at their *true* poses and deskewed with the
-true motion (:mod:`lili_odom.evaluation.truth_map_detection`). A sample with dimension 0 marks
+true motion (:mod:`lili_odom.evaluation.truth_map_detection`). ``--history map`` builds the
+judge's map as the odometry builds its own: every scan from the run's start, KISS-ICP's
+range pruning (samples from ``--every`` after the start). A sample with dimension 0 marks
 a constrained place; every scan of the run belongs to its nearest sample. Reported per run:
 the share of the scans in constrained places that the odometry flagged (the issue's target:
 at most 5 %), split into standstill and driving (true speed below/above 0.05 m/s) and, where
@@ -79,8 +81,9 @@ def _share(flags: np.ndarray) -> float | None:
 
 
 def judge_run(scenario, seed: int, scans_csv: Path, resolution, every: float,
-              history: float) -> dict:
-    """The judge's samples of one run and the odometry's flags in their places."""
+              history: float | None) -> dict:
+    """The judge's samples of one run and the odometry's flags in their places (``history``
+    None: the judge's map in the odometry's extent)."""
     from lili_odom.evaluation.truth_map_detection import TruthMapDetector
     from lili_odom.sim.generator import EPOCH_NS, Simulation
     from lili_odom.suite.scenario import scenario_request
@@ -90,7 +93,7 @@ def judge_run(scenario, seed: int, scans_csv: Path, resolution, every: float,
     stamps, dims, detected = odometry_flags(scans_csv)
     t_scans = stamps - EPOCH_NS * 1e-9  # trial time of each scan's last column
     starts = sim.scan_starts()
-    first = starts[0] + history
+    first = starts[0] + (every if history is None else history)
     samples = []
     for t in np.arange(first, starts[-1] + 1e-9, every):
         t = float(starts[np.argmin(np.abs(starts - t))])
@@ -235,11 +238,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--resolution", help="RxC the runs were simulated at "
                         "(default: each scenario's own)")
     parser.add_argument("--every", type=float, default=2.0, help="seconds between samples")
-    parser.add_argument("--history", type=float, default=3.0,
-                        help="seconds of scans in the judge's map")
+    parser.add_argument("--history", default="3.0",
+                        help="seconds of scans in the judge's map, or 'map': every scan from "
+                        "the run's start with KISS-ICP's range pruning, as the odometry's map")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
-    if not args.every > 0 or not args.history > 0:
+    try:
+        history = None if args.history == "map" else float(args.history)
+    except ValueError:
+        parser.error(f"--history: a number of seconds or 'map', not {args.history!r}")
+    if not args.every > 0 or not (history is None or history > 0):
         parser.error("--every and --history must be positive")
     runs = find_runs(args.runs, args.scenarios)
     if not runs:
@@ -250,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"[{i}/{len(runs)}] {name} seed {seed}", flush=True)
         try:
             rows.append(judge_run(scenarios[name], seed, scans, args.resolution, args.every,
-                                  args.history))
+                                  history))
         except (ValueError, OSError, KeyError) as exc:
             print(f"  skipped: {exc}", file=sys.stderr)
             continue

@@ -73,3 +73,19 @@ def test_placement_moves_the_map_and_the_guess():
         judge.detect(8.0, placement=lambda t: None)
     assert judge.detect(8.0).map_scans == 10  # the true poses again, from the kept sweeps
     assert len(judge._sweeps) <= 11
+
+
+def test_map_in_the_odometrys_extent_grows_in_scan_order():
+    """``history_s=None``: one map grows with every scan from the window's start, as the
+    odometry's does; up to the first 3 s it holds what a 3 s history holds."""
+    sim = Simulation(SimRequest(world="building", trial=1, resolution=(32, 256)))
+    w0 = sim.window()[0]
+    grown = TruthMapDetector(sim, history_s=None)
+    d = grown.detect(w0 + 3.0)
+    same = TruthMapDetector(sim, history_s=3.0).detect(w0 + 3.0)
+    assert d.map_scans == same.map_scans == 30
+    assert d.dimension == same.dimension == 0
+    assert grown.detect(w0 + 5.0).map_scans == 50
+    with pytest.raises(ValueError, match="scan order"):
+        grown.detect(w0 + 4.0)
+    assert len(grown._sweeps) <= 2

@@ -10,6 +10,10 @@ reports there is its answer for the place: a scan the odometry flags where this 
 0 is a false detection of the odometry. With a ``placement`` (e.g. a run's estimated poses) the
 same map is built where the odometry put the scans instead, which shows what its drift does.
 
+The map spans either the ``history_s`` seconds before the tested scan, or (``history_s`` None)
+what the odometry's own map holds: every scan from the start of the simulation window, inserted
+in order into one KISS-ICP map that drops the voxels beyond ``max_range`` of the latest pose.
+
 Frames: ``world`` is the simulation's world frame, poses are ``T_world_lidar`` (os_lidar) at the
 time of a sweep's last column. Times are trial times [s] (the bag's stamps are
 ``EPOCH_NS`` + trial time).
@@ -37,8 +41,9 @@ class TruthMapDetection:
         t_start: trial time of the scan's first column [s].
         t_end: trial time of its last column [s] (the odometry's stamp of the scan).
         pose: 4x4 ``T_world_lidar`` at ``t_end`` (true, or the placement's ``T_frame_lidar``).
-        map_scans: scans in the local map (from ``history_s`` before the scan, not before the
-            simulation window).
+        map_scans: scans inserted into the local map (from ``history_s`` before the scan, or
+            from the window's start in the odometry's extent, not before the simulation
+            window).
         points: scan points handed to the detector.
         result: the detector's result (``result.dimension``: 0 = constrained).
     """
@@ -60,7 +65,9 @@ class TruthMapDetector:
     from a ``placement``).
 
     Each sweep is simulated and preprocessed once: the last ``history_s`` worth of them is
-    kept, so samples whose maps overlap share their scans.
+    kept, so samples whose maps overlap share their scans. In the odometry's extent
+    (``history_s`` None) one map per placement grows with every scan up to the tested one, so
+    its detections must come in the order of their scans.
 
     Args:
         sim: the simulation (world, trajectory, sensors) of the run.
@@ -68,22 +75,27 @@ class TruthMapDetector:
             ``detection_points`` are used (default ``PipelineConfig()``; method ``none`` is
             refused).
         history_s: seconds of scans before the tested one that make up its local map
-            (default 3.0; every scan of that span, as the odometry inserts every scan).
+            (default 3.0; every scan of that span, as the odometry inserts every scan); None:
+            the odometry's extent (every scan from the window's start, KISS-ICP's range
+            pruning).
     """
 
     def __init__(self, sim: Simulation, config: PipelineConfig | None = None,
-                 history_s: float = 3.0) -> None:
+                 history_s: float | None = 3.0) -> None:
         self.sim = sim
         self.config = config or PipelineConfig()
-        self.history_s = float(history_s)
+        self.history_s = None if history_s is None else float(history_s)
         self.detector = make_detector(self.config)
         if self.detector is None:
             raise ValueError("a truth-map detection needs a detector (method is 'none')")
         self._base_to_lidar = sim.sensors.extrinsics.base_to_lidar
         self._period = sim.sensors.lidar.scan_period
-        self._history_scans = int(round(self.history_s / self._period))
+        self._history_scans = (1 if self.history_s is None
+                               else int(round(self.history_s / self._period)))
         self._preprocessor = ScanMatcher(self.config.scan_matcher)
         self._sweeps: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, float]] = {}
+        # placement -> (its growing map, scans inserted, trial start of the next scan to insert)
+        self._running: dict[object, tuple[ScanMatcher, int, float]] = {}
 
     def sweep(self, t_start: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """(map points, source, true ``T_world_lidar``, trial time) of the scan starting at
@@ -118,7 +130,8 @@ class TruthMapDetector:
     def detect(self, t_start: float,
                placement: Callable[[float], np.ndarray | None] | None = None) -> TruthMapDetection:
         """The detection of the scan starting at trial time ``t_start`` against a map of the
-        scans of the ``history_s`` before it (none before the simulation window).
+        scans before it (the ``history_s`` before it, or from the window's start in the
+        odometry's extent; none before the simulation window).
 
         ``placement``: ``f(t)`` -> 4x4 ``T_frame_base`` at trial time ``t`` (a sweep's last
         column), or None where there is none: where the scans are inserted and the tested one
@@ -127,17 +140,8 @@ class TruthMapDetector:
         the true poses. A scan without a placement is left out of the map (the tested one
         raises ``ValueError``).
         """
-        matcher = ScanMatcher(self.config.scan_matcher)
-        window_start = self.sim.window()[0]
-        starts = [t_start - k * self._period for k in range(self._history_scans, 0, -1)]
-        inserted = 0
-        for t in starts:
-            if t < window_start - 1e-9:
-                continue
-            pose = self._pose(t, placement)
-            if pose is not None:
-                matcher.insert(self.sweep(t)[0], pose)
-                inserted += 1
+        matcher, inserted = (self._grown_map(t_start, placement) if self.history_s is None
+                             else self._history_map(t_start, placement))
         _, source, _, t_end = self.sweep(t_start)
         T_end = self._pose(t_start, placement)
         if T_end is None:
@@ -150,3 +154,37 @@ class TruthMapDetector:
         result = self.detector.detect(matcher.reference, source, T_end)
         return TruthMapDetection(t_start=float(t_start), t_end=t_end, pose=T_end,
                                  map_scans=inserted, points=len(source), result=result)
+
+    def _insert(self, matcher: ScanMatcher, t: float, placement) -> int:
+        """Inserts the scan starting at ``t`` at its pose; 1 if it had one, else 0."""
+        pose = self._pose(t, placement)
+        if pose is None:
+            return 0
+        matcher.insert(self.sweep(t)[0], pose)
+        return 1
+
+    def _history_map(self, t_start: float, placement) -> tuple[ScanMatcher, int]:
+        """A fresh map of the ``history_s`` seconds of scans before ``t_start``."""
+        matcher = ScanMatcher(self.config.scan_matcher)
+        window_start = self.sim.window()[0]
+        inserted = 0
+        for k in range(self._history_scans, 0, -1):
+            t = t_start - k * self._period
+            if t >= window_start - 1e-9:
+                inserted += self._insert(matcher, t, placement)
+        return matcher, inserted
+
+    def _grown_map(self, t_start: float, placement) -> tuple[ScanMatcher, int]:
+        """The placement's map grown by every scan from the window's start (or the last
+        call) up to the one before ``t_start``."""
+        key = None if placement is None else placement
+        matcher, inserted, t_next = self._running.get(
+            key, (ScanMatcher(self.config.scan_matcher), 0, self.sim.window()[0]))
+        if t_start < t_next - self._period / 2:
+            raise ValueError(f"the scan at {t_start:.2f} s comes before one already in the "
+                             "map: detections in the odometry's extent go in scan order")
+        n = int(round((t_start - t_next) / self._period))
+        for k in range(n):
+            inserted += self._insert(matcher, t_next + k * self._period, placement)
+        self._running[key] = (matcher, inserted, t_next + n * self._period)
+        return matcher, inserted
