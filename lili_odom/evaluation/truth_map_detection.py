@@ -177,14 +177,13 @@ class TruthMapDetector:
     def _grown_map(self, t_start: float, placement) -> tuple[ScanMatcher, int]:
         """The placement's map grown by every scan from the window's start (or the last
         call) up to the one before ``t_start``."""
-        key = None if placement is None else placement
         matcher, inserted, t_next = self._running.get(
-            key, (ScanMatcher(self.config.scan_matcher), 0, self.sim.window()[0]))
+            placement, (ScanMatcher(self.config.scan_matcher), 0, self.sim.window()[0]))
         if t_start < t_next - self._period / 2:
             raise ValueError(f"the scan at {t_start:.2f} s comes before one already in the "
                              "map: detections in the odometry's extent go in scan order")
         n = int(round((t_start - t_next) / self._period))
         for k in range(n):
             inserted += self._insert(matcher, t_next + k * self._period, placement)
-        self._running[key] = (matcher, inserted, t_next + n * self._period)
+        self._running[placement] = (matcher, inserted, t_next + n * self._period)
         return matcher, inserted
