@@ -190,6 +190,14 @@ def markdown(rows: list[dict], command: str) -> str:
         judged = sum(1 for r in rows if r["false_share"] is not None)
         lines += ["", f"All runs: {_pct(false_all)} of {total_c} constrained scans flagged; "
                       f"{within} of {judged} runs within {TARGET:.0%}."]
+        flagged = {}
+        for r in rows:
+            n = round((r["false_share"] or 0.0) * r["scans_constrained"])
+            flagged[r["scenario"]] = flagged.get(r["scenario"], 0) + n
+        total_f = sum(flagged.values())
+        if total_f:
+            lines.append("Where the flagged constrained scans are: " + ", ".join(
+                f"{name} {n} ({n / total_f:.0%})" for name, n in flagged.items()) + ".")
     return "\n".join(lines + ["", "![false detections](false_detections.png)", ""])
 
 

@@ -25,6 +25,7 @@ from typing import Callable
 
 import numpy as np
 
+from lili_odom.degeneracy.detection_input import thin_evenly
 from lili_odom.degeneracy.result import DegeneracyResult
 from lili_odom.pipeline.odometry import PipelineConfig, make_detector
 from lili_odom.pipeline.scan_matcher import ScanMatcher
@@ -148,9 +149,7 @@ class TruthMapDetector:
             raise ValueError(f"no placement for the scan at {t_start:.2f} s")
         if matcher.map_empty:
             raise ValueError(f"no scan before {t_start:.2f} s in the window: nothing to detect against")
-        n = self.config.detection_points
-        if n and len(source) > n:
-            source = source[:: int(np.ceil(len(source) / n))]
+        source = thin_evenly(source, self.config.detection_points)
         result = self.detector.detect(matcher.reference, source, T_end)
         return TruthMapDetection(t_start=float(t_start), t_end=t_end, pose=T_end,
                                  map_scans=inserted, points=len(source), result=result)

@@ -43,6 +43,7 @@ import numpy as np
 
 from lili_odom import geometry
 from lili_odom.degeneracy.config import usable_length
+from lili_odom.degeneracy.detection_input import thin_evenly
 from lili_odom.degeneracy.hessian import HessianConfig, HessianDetector, ZhangConfig, ZhangDetector
 from lili_odom.degeneracy.lili import LiliConfig, LiliDetector
 from lili_odom.degeneracy.result import DegeneracyResult
@@ -624,10 +625,7 @@ class OdometryPipeline:
             self._worker.reset()
 
     def _detection_points(self, source: np.ndarray) -> np.ndarray:
-        n = self.config.detection_points
-        if n and len(source) > n:
-            return source[:: int(np.ceil(len(source) / n))]
-        return source
+        return thin_evenly(source, self.config.detection_points)
 
     def _detection(self, source: np.ndarray, guess: np.ndarray, pose: np.ndarray,
                    planes: PlaneFitCache) -> DegeneracyResult:
