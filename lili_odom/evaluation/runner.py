@@ -115,6 +115,7 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
     Raises:
         UserError: unreadable bag, missing LiDAR topic, unusable ``out_dir``, no scan processed.
     """
+    from lili_odom.bagio.prefetch import prefetched
     from lili_odom.bagio.reader import BagReader
     from lili_odom.bagio.tum import write_tum
     from lili_odom.bagio.writer import OutputBagWriter
@@ -181,10 +182,12 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
                 yield item
 
         replay.on_output = record
+        messages = prefetched(reader)  # decoded in a thread, ahead of the pipeline
         try:
             pipeline.start()  # the background detector process, before the first scan
-            replay.run(advancing(reader), max_scans=max_scans)
+            replay.run(advancing(messages), max_scans=max_scans)
         finally:
+            messages.close()  # stops the reading thread before the bag is closed
             pipeline.close()  # the background detector process
         run.truth = replay.truth
         bar.close()
