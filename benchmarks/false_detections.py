@@ -62,18 +62,32 @@ def stretch_mask(constrained: np.ndarray, n: int = STRETCH_SAMPLES) -> np.ndarra
     return out
 
 
-def odometry_flags(scans_csv: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """(stamps [s], dimension per scan, the detector's part of it or None) of a run's
-    ``scans.csv``; the detector's part is the dimension less the weak directions the
-    odometry added (column ``weak_directions``, absent in older runs)."""
+def odometry_flags(scans_csv: Path
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """(stamps [s], degenerate dimension per scan, the detector's part of the subspace or
+    None, the subspace's dimension or None) of a run's ``scans.csv``.
+
+    The subspace is what the fusion took from the detection: the degenerate directions and
+    those the LiDAR still holds weakly (column ``weakly_held``; in older runs, without it,
+    ``dimension`` was the whole subspace, and None is returned for it). The detector's part
+    is the subspace less the weak directions the odometry added (column
+    ``weak_directions``, absent in older runs)."""
     with open(scans_csv, newline="") as f:
         rows = list(csv.DictReader(f))
     stamps = np.array([float(r["stamp"]) for r in rows])
     dims = np.array([int(float(r["dimension"])) for r in rows])
-    if rows and "weak_directions" in rows[0]:
-        weak = np.array([int(float(r["weak_directions"])) for r in rows])
-        return stamps, dims, np.maximum(dims - weak, 0)
-    return stamps, dims, None
+
+    def column(name: str) -> np.ndarray | None:
+        if not rows or name not in rows[0]:
+            return None
+        return np.array([int(float(r[name])) for r in rows])
+
+    held = column("weakly_held")
+    subspace = None if held is None else dims + held
+    weak = column("weak_directions")
+    detected = None if weak is None else np.maximum(
+        (dims if subspace is None else subspace) - weak, 0)
+    return stamps, dims, detected, subspace
 
 
 def _share(flags: np.ndarray) -> float | None:
@@ -90,7 +104,7 @@ def judge_run(scenario, seed: int, scans_csv: Path, resolution, every: float,
 
     sim = Simulation(scenario_request(scenario, seed, resolution=resolution))
     judge = TruthMapDetector(sim, history_s=history)
-    stamps, dims, detected = odometry_flags(scans_csv)
+    stamps, dims, detected, subspace = odometry_flags(scans_csv)
     t_scans = stamps - EPOCH_NS * 1e-9  # trial time of each scan's last column
     starts = sim.scan_starts()
     first = starts[0] + (every if history is None else history)
@@ -127,6 +141,8 @@ def judge_run(scenario, seed: int, scans_csv: Path, resolution, every: float,
         "false_share_driving": _share(flagged[constrained & ~still]),
         "false_share_detector": (None if detected is None
                                  else _share(detected[constrained] > 0)),
+        "false_share_subspace": (None if subspace is None
+                                 else _share(subspace[constrained] > 0)),
         "scans_degenerate": int(np.sum(degenerate)),
         "flag_share_degenerate": _share(flagged[degenerate]),
         "series": {"distance_m": travelled.round(2).tolist(), "odometry_dim": dims.tolist(),
@@ -161,26 +177,30 @@ def markdown(rows: list[dict], command: str) -> str:
              "map of the scans before it placed at their true poses "
              "(`lili_odom/evaluation/truth_map_detection.py`). Constrained scans: those whose "
              "nearest sample the judge finds of dimension 0. False: the share of them the "
-             f"odometry flagged (target at most {TARGET:.0%}); standstill below "
-             f"{STANDSTILL_SPEED} m/s true speed; 'detector': the share flagged by the "
-             "detection alone, without the directions the weak-direction check added "
-             "(`plane_refinement.weak_information`; the LiDAR's information along those is "
-             "kept). Last column: the share of the scans in places the judge finds degenerate "
-             "that the odometry flagged too.", "",
+             f"odometry flagged as degenerate (target at most {TARGET:.0%}); standstill below "
+             f"{STANDSTILL_SPEED} m/s true speed. 'Subspace': the share in whose subspace the "
+             "fusion took the LiDAR's measured weight, the directions it holds weakly "
+             "(`plane_refinement.held_information` up to `clear_information`, "
+             "`OdometryOutput.weak_basis`) included; '–' for runs that did not record them, "
+             "where 'false' is that share. 'Detector': the subspace's share without the "
+             "directions the weak-direction check added (`plane_refinement.weak_information`). "
+             "Last column: the share of the scans in places the judge finds degenerate that "
+             "the odometry flagged as degenerate too.", "",
              f"Stretches: runs of at least {STRETCH_SAMPLES} consecutive samples the judge finds "
              "constrained (a single constrained sample between degenerate ones is often a "
              "feature passing by, which a detection that serves several scans cannot follow).",
              "",
              "| scenario | seed | samples (constrained) | constrained scans | false | "
-             "false at standstill | false driving | false, detector | "
+             "false at standstill | false driving | subspace | subspace, detector | "
              f"scans on stretches of {STRETCH_SAMPLES}+ samples | false there | "
              "degenerate scans | flagged there |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(
             f"| {r['scenario']} | {r['seed']} | {r['samples']} ({r['samples_constrained']}) | "
             f"{r['scans_constrained']} | {_pct(r['false_share'])} | "
             f"{_pct(r['false_share_standstill'])} | {_pct(r['false_share_driving'])} | "
+            f"{_pct(r.get('false_share_subspace'))} | "
             f"{_pct(r.get('false_share_detector'))} | {r['scans_on_stretches']} | "
             f"{_pct(r['false_share_stretches'])} | {r['scans_degenerate']} | {_pct(r['flag_share_degenerate'])} |")
     total_c = sum(r["scans_constrained"] for r in rows)
@@ -190,6 +210,10 @@ def markdown(rows: list[dict], command: str) -> str:
         judged = sum(1 for r in rows if r["false_share"] is not None)
         lines += ["", f"All runs: {_pct(false_all)} of {total_c} constrained scans flagged; "
                       f"{within} of {judged} runs within {TARGET:.0%}."]
+        if all(r.get("false_share_subspace") is not None for r in rows):
+            sub = sum(r["false_share_subspace"] * r["scans_constrained"] for r in rows) / total_c
+            lines.append(f"With the weakly held directions: {_pct(sub)} of them had a "
+                         "subspace.")
         flagged = {}
         for r in rows:
             n = round((r["false_share"] or 0.0) * r["scans_constrained"])

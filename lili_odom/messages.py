@@ -400,23 +400,35 @@ def degeneracy_basis_dict(out: OdometryOutput) -> dict[str, Any]:
 
         {"stamp": s, "frame_id": "base_link", "method": str | null, "dimension": k,
          "basis": [{"translation": [3] m, "rotation": [3] rad, "kind": ..., ...}] (base_link),
+         "weak_dimension": m, "weak_basis": [...] (as "basis"),
          "characteristic_length": L m, "pose": 4x4 fused pose (odom frame),
          "ok": bool, "reason": str, "runtime_s": s}
+
+    ``basis``: the directions the LiDAR does not hold; ``weak_basis``: those it holds weakly
+    (:attr:`OdometryOutput.weak_basis`).
     """
-    basis = np.asarray(out.degenerate_basis, dtype=np.float64).reshape(-1, 6)
     L = _length_of(out)
     det = out.degeneracy
-    items = []
-    for row in basis:
-        item: dict[str, Any] = {"translation": row[:3].tolist(), "rotation": row[3:].tolist()}
-        item.update(classify_twist(row, L))
-        items.append(item)
+
+    def items(rows: Any) -> list[dict[str, Any]]:
+        listed = []
+        for row in np.asarray(rows, dtype=np.float64).reshape(-1, 6):
+            item: dict[str, Any] = {"translation": row[:3].tolist(),
+                                    "rotation": row[3:].tolist()}
+            item.update(classify_twist(row, L))
+            listed.append(item)
+        return listed
+
+    basis = items(out.degenerate_basis)
+    weak = items(getattr(out, "weak_basis", np.zeros((0, 6))))
     return {
         "stamp": float(out.stamp),
         "frame_id": "base_link",
         "method": det.method if det is not None else None,
-        "dimension": int(basis.shape[0]),
-        "basis": items,
+        "dimension": len(basis),
+        "basis": basis,
+        "weak_dimension": len(weak),
+        "weak_basis": weak,
         "characteristic_length": L,
         "pose": np.asarray(out.pose, dtype=np.float64).tolist(),
         "ok": bool(det.ok) if det is not None else True,
@@ -432,6 +444,8 @@ def degeneracy_json_msg(f: MessageFactory, out: OdometryOutput) -> Any:
 
 _TRANSLATION_RGBA = (1.0, 0.25, 0.1, 0.9)
 _ROTATION_RGBA = (0.15, 0.45, 1.0, 0.9)
+#: opacity of a weakly constrained direction's marker, relative to a degenerate one's
+_WEAK_ALPHA = 1.0 / 3.0
 _MARKER_DELETEALL = 3
 _MARKER_ARROW = 0
 _MARKER_SPHERE = 2
@@ -449,7 +463,9 @@ def degeneracy_markers(f: MessageFactory, out: OdometryOutput, frame_id: str,
     The first marker is a DELETEALL, so directions of earlier scans disappear. Markers are in
     ``frame_id`` (the odometry frame) at the fused pose: translations are orange arrows of
     ``arrow_length`` [m] from the robot; rotations are blue arrows of the same length centred
-    on the axis point along the rotation axis, with a sphere on the axis point.
+    on the axis point along the rotation axis, with a sphere on the axis point. Weakly
+    constrained directions (:attr:`OdometryOutput.weak_basis`) follow in the same shapes,
+    faint (alpha 0.3).
     """
     T = np.asarray(out.pose, dtype=np.float64)
     R, p = T[:3, :3], T[:3, 3]
@@ -459,18 +475,21 @@ def degeneracy_markers(f: MessageFactory, out: OdometryOutput, frame_id: str,
                      action=_MARKER_DELETEALL, pose=identity)]
     L = _length_of(out)
     basis = np.asarray(out.degenerate_basis, dtype=np.float64).reshape(-1, 6)
+    weak = np.asarray(getattr(out, "weak_basis", np.zeros((0, 6))),
+                      dtype=np.float64).reshape(-1, 6)
     next_id = 0
-    for row in basis:
+    for i, row in enumerate(np.vstack([basis, weak])):
         info = classify_twist(row, L)
+        alpha = 1.0 if i < len(basis) else _WEAK_ALPHA
         if info["kind"] == "translation":
             start = p
             end = p + arrow_length * (R @ np.asarray(info["direction"]))
-            colour = _TRANSLATION_RGBA
+            colour = (*_TRANSLATION_RGBA[:3], _TRANSLATION_RGBA[3] * alpha)
         else:
             centre = p + R @ np.asarray(info["axis_point"])
             half = 0.5 * arrow_length * (R @ np.asarray(info["axis"]))
             start, end = centre - half, centre + half
-            colour = _ROTATION_RGBA
+            colour = (*_ROTATION_RGBA[:3], _ROTATION_RGBA[3] * alpha)
             markers.append(f.new(
                 "visualization_msgs/msg/Marker", header=header, ns=ns, id=next_id,
                 type=_MARKER_SPHERE, action=_MARKER_ADD, pose=pose_msg(f, _translation(centre)),

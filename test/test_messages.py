@@ -197,6 +197,21 @@ def test_degeneracy_json(f):
     assert data["frame_id"] == "base_link"
     assert data["stamp"] == pytest.approx(out.stamp)
     assert np.asarray(data["pose"]).shape == (4, 4)
+    assert data["weak_dimension"] == 0 and data["weak_basis"] == []
+
+
+@pytest.mark.parametrize("f", FACTORIES)
+def test_weakly_constrained_directions_in_the_json_and_faint_markers(f):
+    out = _output()
+    out.weak_basis = np.array([[0.0, 1.0, 0.0, 0.0, 0.0, 0.0]])
+    data = json.loads(_deser(M.degeneracy_json_msg(f, out)).data)
+    assert data["dimension"] == 1 and data["weak_dimension"] == 1
+    assert data["weak_basis"][0]["translation"] == [0.0, 1.0, 0.0]
+    arr = _deser(M.degeneracy_markers(f, out, "lili_odom"))
+    arrows = [m for m in arr.markers[1:] if m.type == 0]
+    alphas = sorted(m.color.a for m in arrows)
+    assert len(arrows) == len(out.degenerate_basis) + 1
+    assert alphas[0] == pytest.approx(alphas[-1] / 3.0)
 
 
 @pytest.mark.parametrize("f", FACTORIES)

@@ -117,14 +117,44 @@ def test_the_odometry_clears_directions_point_to_plane_holds():
     info = np.diag([5000.0, 10.0])  # x held to 1.4 cm, y to 32 cm
     refined = PlaneRefinement(np.eye(4), info, basis.T @ info @ basis, basis)
     pipeline = OdometryPipeline(PipelineConfig())
-    left, left_info = pipeline._clear_held_directions(det, refined)
+    left, left_info, (rows, held) = pipeline._clear_held_directions(det, refined)
     assert left.dimension == 1 and np.allclose(np.abs(left.basis_scaled), AXIS_Y)
     assert np.allclose(left_info, 10.0 * AXIS_Y.T @ AXIS_Y)
     assert left.details["cleared"] == 1 and pipeline.counters["directions_cleared"] == 1
+    assert np.allclose(np.abs(rows), AXIS_Y) and np.allclose(held, [10.0])
     off = OdometryPipeline(PipelineConfig(plane_refinement=PlaneRefinementConfig(
         clear_information=0.0)))
-    same, same_info = off._clear_held_directions(det, refined)
+    same, same_info, (rows, held) = off._clear_held_directions(det, refined)
     assert same.dimension == 2 and np.allclose(same_info, refined.information_scaled)
+    assert np.allclose(sorted(held), [10.0, 5000.0]) and rows.shape == (2, 6)
+
+
+def test_directions_the_lidar_holds_weakly_are_reported_apart_from_degenerate_ones():
+    from lili_odom.degeneracy.result import DegeneracyResult
+    from lili_odom.pipeline.odometry import reported_bases
+
+    T_base_lidar = np.eye(4)
+    T_base_lidar[:3, 3] = [0.2, 0.0, 0.5]
+    basis = np.vstack([AXIS_X, AXIS_Y])
+    det = DegeneracyResult("lili", np.eye(4), basis, 10.0)
+    # x held to 5 cm (400 m^-2), y to 1 m: x weakly constrained, y degenerate at the 100 bar
+    degenerate, weak = reported_bases(det, (basis, np.array([400.0, 1.0])), 100.0, T_base_lidar)
+    assert np.allclose(np.abs(degenerate), [[0, 1, 0, 0, 0, 0]])
+    assert np.allclose(np.abs(weak), [[1, 0, 0, 0, 0, 0]])
+    # every direction degenerate with an infinite bar, and without a refinement's measure
+    degenerate, weak = reported_bases(det, (basis, np.array([400.0, 1.0])), np.inf,
+                                      T_base_lidar)
+    assert degenerate.shape == (2, 6) and weak.shape == (0, 6)
+    degenerate, weak = reported_bases(det, None, 100.0, T_base_lidar)
+    assert degenerate.shape == (2, 6) and weak.shape == (0, 6)
+    # a yaw about the LiDAR is a yaw plus a lateral translation of base_link, unit length
+    yaw = np.array([[0.0, 0.0, 0.0, 0.0, 0.0, 1.0]])
+    degenerate, weak = reported_bases(DegeneracyResult("lili", np.eye(4), yaw, 10.0),
+                                      (yaw, np.array([150.0])), 100.0, T_base_lidar)
+    assert len(degenerate) == 0 and np.isclose(np.linalg.norm(weak[0]), 1.0)
+    assert abs(weak[0, 5]) > 0.9 and abs(weak[0, 1]) > 0.1
+    none_left = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0)
+    assert all(b.shape == (0, 6) for b in reported_bases(none_left, None, 100.0, T_base_lidar))
 
 
 def _pipeline_over(world: np.ndarray, previous_x: float):

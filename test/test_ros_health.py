@@ -182,3 +182,15 @@ def test_processing_status_reports_the_mean_time_of_each_pipeline_stage():
     st = by_name(m.statuses())["processing time"]
     assert st.values["stage_detector_ms"] == "20.0" and st.values["stage_total_ms"] == "40.0"
     assert "(most in detector 20 ms, deskew 10 ms)" in st.message
+
+
+def test_weakly_constrained_directions_are_ok_and_named():
+    clock = FakeClock()
+    m = HealthMonitor(HealthConfig(), clock)
+    out = _output()
+    out.weak_basis = np.array([[1.0, 0, 0, 0, 0, 0]])
+    _feed(m, clock, 2.0, output=out)
+    s = by_name(m.statuses({"scan_errors": 0}))["degeneracy"]
+    assert s.level == OK and "1 weakly constrained" in s.message
+    assert s.values["dimension"] == "0" and s.values["weakly_constrained"] == "1"
+    assert s.values["weak_direction_0"].startswith("translation (+1.00")

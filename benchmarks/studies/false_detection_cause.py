@@ -49,7 +49,7 @@ def odometry_dimension(run_dir: Path, epoch_s: float):
     """``f(trial time)`` -> the subspace dimension the odometry used at that scan (or None)."""
     from benchmarks.false_detections import odometry_flags
 
-    stamps, dims, _ = odometry_flags(run_dir / "scans.csv")
+    stamps, dims, _, _ = odometry_flags(run_dir / "scans.csv")
     t = stamps - epoch_s
 
     def dim(tq: float):

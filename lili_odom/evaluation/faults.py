@@ -281,7 +281,7 @@ def run_stream(items: Iterable[Any], config: Any, *,
 
     def record(out, pipeline) -> None:
         run.estimates.append((out.stamp, np.asarray(out.pose, dtype=np.float64)))
-        run.dimensions.append(out.degeneracy.dimension if out.degeneracy is not None else 0)
+        run.dimensions.append(len(out.degenerate_basis))
         if on_output is not None:
             on_output(out, pipeline)
 

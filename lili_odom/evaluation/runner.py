@@ -7,7 +7,8 @@ order through the replay loop (:class:`~lili_odom.evaluation.replay.Replay`: the
 * ``odometry/``: rosbag2 mcap with ``/lili_odom/odometry``, ``path``, degeneracy markers and JSON
   basis, ``/tf`` and the final local map;
 * ``estimate.tum`` and, when the bag has ground truth, ``truth.tum`` (TUM: stamp x y z qx qy qz qw);
-* ``scans.csv``: one row per processed scan: stamp [s], detected dimension, position [m],
+* ``scans.csv``: one row per processed scan: stamp [s], degenerate dimension (directions the
+  LiDAR does not hold, ``OdometryOutput.degenerate_basis``), position [m],
   per-stage times [s], the online wheel scale, the orientation of the scan-to-map registration
   (base_link in the odometry frame, quaternion ``icp_qx .. icp_qw``; the fused one is in
   ``estimate.tum``), the estimated IMU biases (``accel_bias_*`` [m/s^2], ``gyro_bias_*``
@@ -15,8 +16,9 @@ order through the replay loop (:class:`~lili_odom.evaluation.replay.Replay`: the
   (``gravity_tilt_x/y`` [rad], ``fusion.gravity_tracking_gain``), and how the scan's subspace
   came about: ``weak_directions`` (directions of planar motion the weak-direction check added to
   the detector's, ``plane_refinement.weak_information``), ``reused`` (1 when a recent detection
-  served the scan) and ``screened`` (1 when the planes held every direction and the detector
-  was not asked);
+  served the scan), ``screened`` (1 when the planes held every direction and the detector
+  was not asked) and ``weakly_held`` (directions of the subspace the LiDAR still holds, with
+  its measured weight: ``OdometryOutput.weak_basis``);
 * ``metrics.json``: ATE / RPE (via ``evo``, when there is truth), degeneracy statistics,
   counters, mean per-stage timings, throughput;
 * ``trajectory.png``: top view of the estimate (degenerate scans marked) and the truth.
@@ -48,6 +50,7 @@ class OfflineRun:
     method: str
     estimates: list[tuple[float, np.ndarray]] = field(default_factory=list)
     truth: list[tuple[float, np.ndarray]] = field(default_factory=list)
+    #: per scan: the degenerate dimension (directions the LiDAR does not hold)
     dimensions: list[int] = field(default_factory=list)
     #: per scan: the detection's (k, 6) basis in the sensor body frame, scaled (empty: none)
     bases_scaled: list[np.ndarray] = field(default_factory=list)
@@ -155,7 +158,7 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
         bar = _Progress(reader.message_count, not progress, progress_label)
 
         def record(out, _pipeline) -> None:
-            dim = out.degeneracy.dimension if out.degeneracy is not None else 0
+            dim = len(out.degenerate_basis)
             run.estimates.append((out.stamp, out.pose))
             run.dimensions.append(dim)
             det = out.degeneracy
@@ -170,7 +173,7 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
                          *_vector(out.details.get("accel_bias")),
                          *_vector(out.details.get("gyro_bias")),
                          *_vector(out.details.get("gravity_tilt"), 2),
-                         *_origin(det)])
+                         *_origin(det), len(out.weak_basis)])
             writer.write_output(out)
             if accumulator is not None and out.stamp - last_accumulated[0] >= 1.0:
                 accumulator.add(pipeline.local_map_points())
@@ -212,7 +215,8 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
         w.writerow(["stamp", "dimension", "x", "y", "z", *(f"{k}_s" for k in STAGES),
                     "wheel_scale", "icp_qx", "icp_qy", "icp_qz", "icp_qw",
                     *(f"accel_bias_{a}" for a in "xyz"), *(f"gyro_bias_{a}" for a in "xyz"),
-                    "gravity_tilt_x", "gravity_tilt_y", "weak_directions", "reused", "screened"])
+                    "gravity_tilt_x", "gravity_tilt_y", "weak_directions", "reused", "screened",
+                    "weakly_held"])
         w.writerows(rows)
     dims = np.asarray(run.dimensions)
     summary: dict = {

@@ -184,8 +184,35 @@ def basis_in_base(result: DegeneracyResult, T_base_lidar: np.ndarray) -> np.ndar
     """Plain unit twists (k, 6) of the degenerate subspace in base_link (``(v, w)``)."""
     if result is None or result.dimension == 0:
         return np.zeros((0, 6))
-    B = result.basis @ geometry.adjoint(T_base_lidar).T
+    return _rows_in_base(result.basis_scaled, result.characteristic_length, T_base_lidar)
+
+
+def _rows_in_base(rows_scaled: np.ndarray, length: float, T_base_lidar: np.ndarray
+                  ) -> np.ndarray:
+    """Scaled LiDAR twists (k, 6) (characteristic length ``length`` [m]) as plain unit twists
+    (k, 6) of base_link."""
+    if not len(rows_scaled):
+        return np.zeros((0, 6))
+    B = geometry.unscale_twist(rows_scaled, length) @ geometry.adjoint(T_base_lidar).T
     return B / np.linalg.norm(B, axis=1, keepdims=True)
+
+
+def reported_bases(result: DegeneracyResult | None, held: tuple[np.ndarray, np.ndarray] | None,
+                   held_information: float, T_base_lidar: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """(degenerate, weakly constrained) plain unit twists in base_link of the subspace
+    ``result`` the fusion used: ``held`` = (rows (k, 6) scaled LiDAR twists spanning it, the
+    point-to-plane information [1/m^2] along each) splits it at ``held_information``; without
+    ``held`` (no refinement measured it) the whole subspace is degenerate."""
+    if result is None or result.dimension == 0:
+        return np.zeros((0, 6)), np.zeros((0, 6))
+    if held is None:
+        return basis_in_base(result, T_base_lidar), np.zeros((0, 6))
+    rows, information = held
+    weak = np.asarray(information, dtype=float) >= held_information
+    L = result.characteristic_length
+    return (_rows_in_base(rows[~weak], L, T_base_lidar),
+            _rows_in_base(rows[weak], L, T_base_lidar))
 
 
 class OdometryPipeline:
@@ -440,6 +467,7 @@ class OdometryPipeline:
 
         t0 = time.perf_counter()
         subspace = None
+        held = None
         refine = self.config.plane_refinement
         if (refine.enabled and self.config.fusion.lidar.subspace_information and reg.ok
                 and degeneracy is not None and degeneracy.ok and degeneracy.degenerate):
@@ -451,7 +479,7 @@ class OdometryPipeline:
                 refined = self._refined_from_prediction(planes, refined, measured, guess,
                                                         degeneracy)
             if refined.ok:
-                degeneracy, info = self._clear_held_directions(degeneracy, refined)
+                degeneracy, info, held = self._clear_held_directions(degeneracy, refined)
                 measured = refined.pose
                 if degeneracy.degenerate:
                     subspace = SubspaceMeasurement(refined.pose @ np.linalg.inv(T_bl), info,
@@ -505,13 +533,18 @@ class OdometryPipeline:
         timings["map"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_start
 
+        degenerate_basis, weak_basis = reported_bases(degeneracy, held,
+                                                      refine.held_information, T_bl)
+        if len(weak_basis):
+            self.counters["weakly_held_scans"] += 1
         out = OdometryOutput(
             stamp=t_ref,
             pose=fused.pose,
             twist=twist,
             covariance=fused.covariance,
             degeneracy=degeneracy,
-            degenerate_basis=basis_in_base(degeneracy, T_bl) if degeneracy is not None else np.zeros((0, 6)),
+            degenerate_basis=degenerate_basis,
+            weak_basis=weak_basis,
             icp_pose=reg.pose @ np.linalg.inv(T_bl),
             timings=timings,
             warnings=warnings,
@@ -950,10 +983,12 @@ class OdometryPipeline:
         return geometry.orthonormalize(pose @ geometry.exp(kept))
 
     def _clear_held_directions(self, degeneracy: DegeneracyResult, refined
-                               ) -> tuple[DegeneracyResult, np.ndarray]:
+                               ) -> tuple[DegeneracyResult, np.ndarray,
+                                          tuple[np.ndarray, np.ndarray]]:
         """The detection without the directions point-to-plane holds as well as a
-        well-constrained one (information >= ``plane_refinement.clear_information``), and the
-        subspace information (scaled, 6x6) of the directions left.
+        well-constrained one (information >= ``plane_refinement.clear_information``), the
+        subspace information (scaled, 6x6) of the directions left, and those directions as
+        rows (k, 6) of scaled LiDAR twists with the information [1/m^2] along each.
 
         Point-to-point LiLi flags a direction whose perturbations do not come back; in a young
         local map, whose sampling pattern moved with the sensor, that happens along the
@@ -962,17 +997,16 @@ class OdometryPipeline:
         """
         limit = self.config.plane_refinement.clear_information
         info = refined.information_scaled
-        if not limit > 0:
-            return degeneracy, info
         w, V = np.linalg.eigh(0.5 * (refined.information + refined.information.T))
-        keep = w < limit
-        if keep.all():
-            return degeneracy, info
-        self.counters["directions_cleared"] += int((~keep).sum())
+        keep = w < limit if limit > 0 else np.ones(len(w), dtype=bool)
         rows = V[:, keep].T @ refined.basis_scaled
+        held = (rows, w[keep])
+        if keep.all():
+            return degeneracy, info, held
+        self.counters["directions_cleared"] += int((~keep).sum())
         info = rows.T @ np.diag(w[keep]) @ rows
         details = {**degeneracy.details, "cleared": int((~keep).sum())}
-        return replace(degeneracy, basis_scaled=rows, details=details), info
+        return replace(degeneracy, basis_scaled=rows, details=details), info, held
 
     def _body_twist(self, fused) -> np.ndarray:
         """(v, w) of base_link in base_link from the fused velocity and the pose change."""

@@ -106,6 +106,13 @@ class PlaneRefinementConfig:
             at least this [1/m^2] is measured by the refined pose like a constrained one and
             removed from the degenerate subspace (default 1000: a 3 cm sigma, as
             ``weak_information``); 0 = never.
+        held_information: a direction of the degenerate subspace along which the
+            refinement's information is at least this [1/m^2] is reported as weakly
+            constrained rather than degenerate (``OdometryOutput.weak_basis``, not
+            ``degenerate_basis``): the LiDAR holds it, and the fusion takes it with that
+            weight either way, so this only sets what the outputs call degenerate. Default
+            100 (a 10 cm sigma, as ``min_along_information``); 1e12: every direction of the
+            subspace is reported as degenerate.
         screen_detections: skip the degeneracy detector on a scan whose registration the
             planes hold in every direction with at least ``clear_information`` (the debiased
             point-to-plane information over all six scaled twists, from the planes the checks
@@ -146,6 +153,7 @@ class PlaneRefinementConfig:
     weak_information: float = 1000.0
     min_along_information: float = 100.0
     clear_information: float = 1000.0
+    held_information: float = 100.0
     refine_constrained: str = "planar"
     constrained_information: float = 1000.0
     screen_detections: bool = True
@@ -177,6 +185,7 @@ class PlaneRefinementConfig:
         check_range(prefix + "weak_information", self.weak_information, 0.0, 1e12)
         check_range(prefix + "min_along_information", self.min_along_information, 0.0, 1e12)
         check_range(prefix + "clear_information", self.clear_information, 0.0, 1e12)
+        check_range(prefix + "held_information", self.held_information, 0.0, None)
         check_range(prefix + "constrained_information", self.constrained_information, 0.0,
                     1e12, lo_open=True)
         check_range(prefix + "min_linearity", self.min_linearity, 0.0, 1.0)

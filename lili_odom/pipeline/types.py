@@ -75,7 +75,13 @@ class OdometryOutput:
         covariance: 6x6 pose covariance in base_link, ``(v, w)`` order, honest (large) along
             directions only weakly constrained.
         degeneracy: the detector's result (None for ``none`` or when skipped).
-        degenerate_basis: (k, 6) plain unit twists of the degenerate subspace in base_link.
+        degenerate_basis: (k, 6) plain unit twists of the degenerate subspace in base_link:
+            the directions the LiDAR does not hold (the wheels and the IMU do).
+        weak_basis: (m, 6) plain unit twists in base_link of the directions of the detected
+            subspace that the LiDAR still holds, with less information than a constrained
+            direction (``plane_refinement.held_information`` up to ``clear_information``);
+            the fusion takes them with the LiDAR's measured weight. Empty unless the
+            point-to-plane refinement measured the subspace.
         icp_pose: 4x4 raw registration result of base_link (for diagnostics, never the map).
         timings: seconds per stage (parse, deskew, icp, detector, fusion, map, total).
         warnings: human-readable notes for this scan (e.g. "no wheel data").
@@ -87,6 +93,7 @@ class OdometryOutput:
     covariance: np.ndarray
     degeneracy: DegeneracyResult | None = None
     degenerate_basis: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    weak_basis: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
     icp_pose: np.ndarray | None = None
     timings: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)

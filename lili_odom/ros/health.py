@@ -351,11 +351,19 @@ class HealthMonitor:
                            dtype=float).reshape(-1, 6)
         dims = len(basis)
         directions = [describe_direction(b) for b in basis]
-        values = {"dimension": str(dims), "stamp": _fmt(float(out.stamp), 3)}
+        weak = np.asarray(getattr(out, "weak_basis", np.zeros((0, 6))),
+                          dtype=float).reshape(-1, 6)
+        values = {"dimension": str(dims), "stamp": _fmt(float(out.stamp), 3),
+                  "weakly_constrained": str(len(weak))}
         for i, d in enumerate(directions):
             values[f"direction_{i}"] = d
+        for i, b in enumerate(weak):
+            values[f"weak_direction_{i}"] = describe_direction(b)
         if getattr(out, "degeneracy", None) is None:
             values["detector"] = "none or skipped"
+        if dims == 0 and len(weak):
+            return Status(name, OK, f"constrained (dimension 0; {len(weak)} weakly "
+                          "constrained, held by the LiDAR)", values)
         if dims == 0:
             return Status(name, OK, "constrained (dimension 0)", values)
         return Status(name, WARN, f"degenerate, dimension {dims}: " + "; ".join(directions),
