@@ -47,6 +47,25 @@ def test_constrained_stretches_need_consecutive_samples():
     assert not stretch_mask(np.zeros(4, dtype=bool)).any()
 
 
+def test_odometry_flags_read_the_degenerate_and_the_weakly_held_directions(tmp_path):
+    from benchmarks.false_detections import odometry_flags
+
+    new = tmp_path / "new.csv"
+    new.write_text("stamp,dimension,weak_directions,weakly_held\n"
+                   "1.0,0,0,0\n1.1,0,1,1\n1.2,1,0,1\n1.3,1,1,0\n")
+    stamps, dims, detected, subspace = odometry_flags(new)
+    np.testing.assert_allclose(stamps, [1.0, 1.1, 1.2, 1.3])
+    np.testing.assert_array_equal(dims, [0, 0, 1, 1])
+    np.testing.assert_array_equal(subspace, [0, 1, 2, 1])
+    np.testing.assert_array_equal(detected, [0, 0, 2, 0])  # the subspace less the weak check's
+    old = tmp_path / "old.csv"  # runs before the split: dimension was the whole subspace
+    old.write_text("stamp,dimension,weak_directions\n1.0,2,1\n1.1,0,0\n")
+    _, dims, detected, subspace = odometry_flags(old)
+    np.testing.assert_array_equal(dims, [2, 0])
+    np.testing.assert_array_equal(detected, [1, 0])
+    assert subspace is None
+
+
 def test_placement_moves_the_map_and_the_guess():
     """Scans placed by another frame's poses (here the truth moved rigidly) give the same
     answer; a scan the placement has no pose for is left out of the map, or refused when it
