@@ -131,3 +131,25 @@ def test_bad_messages_are_counted_not_raised(feeder):
     counters = feeder.pipeline.counters
     assert counters["bad_message" + c.imu_topic.replace("/", "_")] == 1
     assert counters["bad_clouds"] == 1
+
+
+def test_a_cloud_parsed_ahead_is_fed_as_the_message_would_be():
+    rng = np.random.default_rng(4)
+    cfg = NodeConfig()
+    cfg.pipeline.method = "none"
+    direct = MessageFeeder(OdometryPipeline(cfg.pipeline), cfg)
+    ahead = MessageFeeder(OdometryPipeline(cfg.pipeline), cfg)
+    clouds = [_cloud(rng, 5.0 + 0.1 * k) for k in range(3)]
+    parsed = [ahead.parse_ahead(m) for m in clouds]  # before any is fed, as a reading thread
+    outs_direct = [o for m in clouds for o in direct.feed(cfg.lidar_topic, m)]
+    outs_ahead = [o for p in parsed for o in ahead.feed(cfg.lidar_topic, p)]
+    assert len(outs_direct) == len(outs_ahead) == 3
+    for a, b in zip(outs_direct, outs_ahead):  # KISS-ICP's threaded sums: the last bits only
+        assert a.stamp == b.stamp and np.allclose(a.pose, b.pose, atol=1e-6)
+    # a malformed cloud is counted as a bad cloud, a non-message as a bad message, as when fed
+    broken = F.new("sensor_msgs/msg/PointCloud2", header=M.header_msg(F, 1.0, "os_lidar"))
+    assert ahead.feed(cfg.lidar_topic, ahead.parse_ahead(broken)) == []
+    assert ahead.feed(cfg.lidar_topic, ahead.parse_ahead(object())) == []
+    counters = ahead.pipeline.counters
+    assert counters["bad_clouds"] == 1
+    assert counters["bad_message" + cfg.lidar_topic.replace("/", "_")] == 1

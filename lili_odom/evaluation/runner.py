@@ -2,7 +2,9 @@
 
 :func:`run_bag` is what ``lili-odom run`` and the benchmarks call. It reads the bag in header-stamp
 order through the replay loop (:class:`~lili_odom.evaluation.replay.Replay`: the same
-:class:`~lili_odom.pipeline.feeder.MessageFeeder` as the node) and writes into ``out_dir``:
+:class:`~lili_odom.pipeline.feeder.MessageFeeder` as the node; the bag is decoded and its clouds
+parsed in a thread ahead of the pipeline, :mod:`lili_odom.bagio.prefetch`) and writes into
+``out_dir``:
 
 * ``odometry/``: rosbag2 mcap with ``/lili_odom/odometry``, ``path``, degeneracy markers and JSON
   basis, ``/tf`` and the final local map;
@@ -184,8 +186,18 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
                 bar.advance()
                 yield item
 
+        def parsed(items):
+            """(topic, message) of ``items``, the clouds parsed already (in the reading
+            thread, off the pipeline's)."""
+            for item in items:
+                msg = item.msg
+                if item.topic == config.lidar_topic:
+                    msg = replay.feeder.parse_ahead(msg)
+                yield item.topic, msg
+
         replay.on_output = record
-        messages = prefetched(reader)  # decoded in a thread, ahead of the pipeline
+        # decoded, and the clouds parsed, in a thread ahead of the pipeline
+        messages = prefetched(parsed(reader))
         try:
             pipeline.start()  # the background detector process, before the first scan
             replay.run(advancing(messages), max_scans=max_scans)

@@ -58,6 +58,23 @@ def sweep_end(scan: Scan, default_sweep_s: float) -> float:
     return scan.stamp + default_sweep_s
 
 
+class ParsedAhead:
+    """A cloud message already parsed (:meth:`MessageFeeder.parse_ahead`, e.g. by a thread
+    reading a bag ahead of the pipeline). Fed on the LiDAR topic in place of the message, it
+    is queued, or its error counted, exactly as the message would have been."""
+
+    __slots__ = ("_scan", "_error")
+
+    def __init__(self, scan: Scan | None, error: Exception | None) -> None:
+        self._scan, self._error = scan, error
+
+    def result(self) -> Scan:
+        """The parsed scan; raises what parsing the message raised."""
+        if self._error is not None:
+            raise self._error
+        return self._scan
+
+
 class MessageFeeder:
     """Dispatch messages by topic to the pipeline (see module docstring).
 
@@ -123,9 +140,20 @@ class MessageFeeder:
         if np.isfinite(stamp):
             self._newest_input = max(self._newest_input, float(stamp))
 
+    def parse_ahead(self, msg: Any) -> ParsedAhead:
+        """``msg`` (a cloud) parsed now, to be fed later in its place. Depends on the
+        configuration only, so another thread may call it while this one feeds."""
+        try:
+            return ParsedAhead(messages.scan_from_msg(msg, self._parse), None)
+        except Exception as exc:  # noqa: BLE001 - raised again when fed, handled there
+            return ParsedAhead(None, exc)
+
     def _queue_scan(self, msg: Any) -> None:
         try:
-            scan = messages.scan_from_msg(msg, self._parse)
+            if isinstance(msg, ParsedAhead):
+                scan = msg.result()
+            else:
+                scan = messages.scan_from_msg(msg, self._parse)
         except ValueError as exc:
             self._count("bad_clouds")
             log.warning("cloud skipped: %s", exc)
