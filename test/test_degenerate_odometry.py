@@ -55,3 +55,38 @@ def test_lili_follows_the_wheels_where_none_slides(featureless_bag):
     # and that is what decides the accuracy
     assert lili_m.ate_rmse_m < 0.3, lili_m
     assert none_m.ate_rmse_m > 0.5 and none_m.ate_rmse_m > 4 * lili_m.ate_rmse_m, (none_m, lili_m)
+
+
+def test_without_wheel_data_the_subspace_information_takes_its_factor(featureless_bag,
+                                                                      monkeypatch):
+    """``plane_refinement.information_without_wheels`` scales the refinement's information
+    on scans without wheel data, and only there."""
+    from lili_odom.fusion.estimator import FusionEstimator
+
+    def first_subspace_information(factor, wheels):
+        config = NodeConfig()
+        config.pipeline.method = "lili"
+        config.pipeline.plane_refinement.information_without_wheels = factor
+        seen = []
+        update = FusionEstimator.update
+
+        def recording(self, t, T_icp_base, degeneracy, subspace=None):
+            if subspace is not None and np.abs(subspace.information_scaled).max() > 0:
+                seen.append(np.array(subspace.information_scaled))  # the runs part after it
+            return update(self, t, T_icp_base, degeneracy, subspace=subspace)
+
+        monkeypatch.setattr(FusionEstimator, "update", recording)
+        topics = [config.lidar_topic, config.imu_topic, "/tf_static"]
+        if wheels:
+            topics.append(config.wheel_topic)
+        replay = Replay(config)
+        with BagReader(featureless_bag, topics=topics) as reader:
+            replay.run(reader, max_scans=30)
+        monkeypatch.setattr(FusionEstimator, "update", update)
+        assert seen, "no scan had a subspace measurement with information"
+        return seen[0]
+
+    full = first_subspace_information(1.0, wheels=False)
+    np.testing.assert_allclose(first_subspace_information(0.25, wheels=False), 0.25 * full)
+    with_wheels = first_subspace_information(1.0, wheels=True)
+    np.testing.assert_allclose(first_subspace_information(0.25, wheels=True), with_wheels)

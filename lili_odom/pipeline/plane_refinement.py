@@ -113,6 +113,10 @@ class PlaneRefinementConfig:
             weight either way, so this only sets what the outputs call degenerate. Default
             100 (a 10 cm sigma, as ``min_along_information``); 1e12: every direction of the
             subspace is reported as degenerate.
+        information_without_wheels: factor on the subspace information the fusion gets
+            from the refinement on a scan without wheel data (dimensionless, 0..1); default
+            1 (the measured information). Below 1 the fusion leans on the IMU along weakly
+            held directions during a wheel outage or without wheels.
         screen_detections: skip the degeneracy detector on a scan whose registration the
             planes hold in every direction with at least ``clear_information`` (the debiased
             point-to-plane information over all six scaled twists, from the planes the checks
@@ -154,6 +158,7 @@ class PlaneRefinementConfig:
     min_along_information: float = 100.0
     clear_information: float = 1000.0
     held_information: float = 100.0
+    information_without_wheels: float = 1.0
     refine_constrained: str = "planar"
     constrained_information: float = 1000.0
     screen_detections: bool = True
@@ -186,6 +191,8 @@ class PlaneRefinementConfig:
         check_range(prefix + "min_along_information", self.min_along_information, 0.0, 1e12)
         check_range(prefix + "clear_information", self.clear_information, 0.0, 1e12)
         check_range(prefix + "held_information", self.held_information, 0.0, None)
+        check_range(prefix + "information_without_wheels", self.information_without_wheels,
+                    0.0, 1.0)
         check_range(prefix + "constrained_information", self.constrained_information, 0.0,
                     1e12, lo_open=True)
         check_range(prefix + "min_linearity", self.min_linearity, 0.0, 1.0)
