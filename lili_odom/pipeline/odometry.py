@@ -482,7 +482,8 @@ class OdometryPipeline:
                 degeneracy, info, held = self._clear_held_directions(degeneracy, refined)
                 measured = refined.pose
                 if degeneracy.degenerate:
-                    if wheel_prediction() is None:  # no wheel data for this scan
+                    if (refine.information_without_wheels != 1.0
+                            and wheel_prediction() is None):  # no wheel data for this scan
                         info = refine.information_without_wheels * info
                     subspace = SubspaceMeasurement(refined.pose @ np.linalg.inv(T_bl), info,
                                                    degeneracy.characteristic_length)
