@@ -58,8 +58,3 @@ def test_leaving_early_stops_the_producer():
     assert len(produced) <= 2 + 4 + 2
     assert not any(t.name == "lili_odom_prefetch" and t.is_alive() for t in threading.enumerate())
 
-
-def test_closing_before_the_first_item_starts_no_thread():
-    items = prefetched(iter(range(3)), depth=4)
-    items.close()
-    assert not any(t.name == "lili_odom_prefetch" for t in threading.enumerate())
