@@ -90,3 +90,23 @@ def test_without_wheel_data_the_subspace_information_takes_its_factor(featureles
     np.testing.assert_allclose(first_subspace_information(0.25, wheels=False), 0.25 * full)
     with_wheels = first_subspace_information(1.0, wheels=True)
     np.testing.assert_allclose(first_subspace_information(0.25, wheels=True), with_wheels)
+
+
+@pytest.mark.parametrize("wheels", [False, True])
+def test_the_return_check_runs_on_scans_without_wheel_data_only(featureless_bag, wheels):
+    """``plane_refinement.return_check`` tests the subspace information of scans without
+    wheel data; with wheels the refinement starts at their prediction and is not tested."""
+    config = NodeConfig()
+    config.pipeline.method = "lili"
+    topics = [config.lidar_topic, config.imu_topic, "/tf_static"]
+    if wheels:
+        topics.append(config.wheel_topic)
+    replay = Replay(config)
+    with BagReader(featureless_bag, topics=topics) as reader:
+        replay.run(reader, max_scans=30)
+    counters = replay.pipeline.counters
+    if wheels:
+        assert counters["return_checks"] == 0
+    else:
+        assert counters["return_checks"] > 0
+        assert counters["unheld_directions"] <= counters["return_checks"]

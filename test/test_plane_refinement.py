@@ -7,7 +7,8 @@ from lili_odom import geometry
 from lili_odom.degeneracy.reference import ReferenceMap
 from lili_odom.pipeline.plane_refinement import (PlaneFitCache, PlaneRefinementConfig,
                                                  fit_planes, plane_jacobians,
-                                                 refine_in_subspace)
+                                                 refine_in_subspace, returned_directions,
+                                                 without_unheld)
 
 AXIS_X = np.array([[1.0, 0, 0, 0, 0, 0]])  # scaled twist: translation along the corridor
 AXIS_Y = np.array([[0, 1.0, 0, 0, 0, 0]])
@@ -587,3 +588,94 @@ def test_only_near_vertical_lines_are_used(tilt_deg, used):
     normals = fits.normals
     assert np.allclose(np.abs(normals @ u), 0.0, atol=0.05)  # both across the line
     assert np.allclose(np.einsum("ij,ij->i", normals[:n], normals[n:]), 0.0, atol=1e-9)
+
+
+def toothed_tube(length: float = 200.0, period: float = 0.12, depth: float = 0.04,
+                 width: float = 2.6, height: float = 3.0, seed: int = 0) -> np.ndarray:
+    """A corridor without end walls whose side walls are a fine sawtooth along x (teeth of
+    ``period`` [m], ``depth`` [m] deep): every tooth holds a point along the axis, but only to
+    within one period."""
+    rng = np.random.default_rng(seed)
+    X, Z = np.meshgrid(np.arange(0.0, length, 0.02), np.arange(0.0, height, 0.1))
+    X, Z = X.ravel(), Z.ravel()
+    tooth = depth * (X % period) / period
+    walls = [np.c_[X, side * (width / 2 + tooth), Z] for side in (-1, 1)]
+    Xf, Yf = np.meshgrid(np.arange(0.0, length, 0.1), np.arange(-width / 2, width / 2, 0.1))
+    flats = [np.c_[Xf.ravel(), Yf.ravel(), np.full(Xf.size, z)] for z in (0.0, height)]
+    pts = np.vstack(walls + flats)
+    return pts + rng.normal(0.0, 0.002, pts.shape)
+
+
+def test_end_walls_bring_a_moved_refinement_back():
+    world = corridor(40.0, end_walls=True)
+    ref = ReferenceMap.from_points(world, 1.0, 200)
+    scan = scan_at(world, 25.0)
+    res = refine_in_subspace(scan, ref, pose_at(25.01), AXIS_X, 10.0)
+    rows, ratios = returned_directions(scan, ref, res, 10.0)
+    assert np.allclose(np.abs(rows), AXIS_X)
+    assert abs(ratios[0]) < 0.1  # back from 10 cm to within 1 cm
+    assert without_unheld(res, rows, ratios, 0.5) is res
+
+
+def test_information_a_moved_refinement_does_not_come_back_along_is_dropped():
+    # the teeth give the axis point-to-plane information, but a refinement moved by 10 cm
+    # settles on the next tooth (12 cm on) instead of coming back
+    world = toothed_tube()
+    ref = ReferenceMap.from_points(world, 1.0, 200)
+    scan = scan_at(world, 100.0)
+    res = refine_in_subspace(scan, ref, pose_at(100.01), AXIS_X, 10.0)
+    assert res.information[0, 0] > 100.0  # claims better than 10 cm
+    rows, ratios = returned_directions(scan, ref, res, 10.0)
+    assert ratios[0] > 0.5
+    held = without_unheld(res, rows, ratios, 0.5)
+    assert held is not res and held.details["unheld"] == 1
+    assert np.allclose(held.information, 0.0) and np.allclose(held.information_scaled, 0.0)
+    assert np.array_equal(held.pose, res.pose)
+
+
+def test_only_the_directions_that_did_not_come_back_lose_their_information():
+    from lili_odom.pipeline.plane_refinement import PlaneRefinement
+
+    B = np.vstack([AXIS_X, AXIS_Y])
+    info = np.diag([400.0, 900.0])
+    res = PlaneRefinement(np.eye(4), info, B.T @ info @ B, B)
+    rows = np.vstack([AXIS_Y, AXIS_X])  # eigen-directions in another order
+    held = without_unheld(res, rows, np.array([0.1, 2.0]), 0.5)
+    assert np.allclose(held.information, np.diag([0.0, 900.0]))
+    assert np.allclose(held.information_scaled, AXIS_Y.T @ AXIS_Y * 900.0)
+    assert without_unheld(res, rows, np.array([0.1, -0.4]), 0.5) is res
+    # a moved refinement that found too few planes (inf) did not come back either
+    assert np.allclose(without_unheld(res, rows, np.array([np.inf, 0.0]), 0.5).information,
+                       np.diag([400.0, 0.0]))
+
+
+def test_a_direction_without_information_is_not_tested(monkeypatch):
+    import lili_odom.pipeline.plane_refinement as plane_refinement
+
+    world = corridor(200.0, end_walls=False)
+    ref = ReferenceMap.from_points(world, 1.0, 200)
+    scan = scan_at(world, 100.0)
+    res = refine_in_subspace(scan, ref, pose_at(100.0), AXIS_X, 10.0)
+    assert res.information[0, 0] < 1.0
+    calls = []
+    monkeypatch.setattr(plane_refinement, "refine_in_subspace",
+                        lambda *a, **k: calls.append(a) or res)
+    rows, ratios = returned_directions(scan, ref, res, 10.0)
+    assert ratios.tolist() == [0.0] and not calls
+
+
+def test_without_wheels_the_pipeline_drops_information_that_does_not_come_back():
+    from lili_odom.degeneracy.result import DegeneracyResult
+
+    det = DegeneracyResult("lili", np.eye(4), AXIS_X, 10.0)
+    for world, x, kept in ((corridor(40.0, end_walls=True), 25.0, True),
+                           (toothed_tube(), 100.0, False)):
+        pipeline = _pipeline_over(world, x - 0.1)
+        fits = planes(pipeline, scan_at(world, x))
+        start = pose_at(x + 0.01)
+        res = refine_in_subspace(fits.points, fits.reference, start, AXIS_X, 10.0,
+                                 pipeline.config.plane_refinement, fits=fits.at(start))
+        held = pipeline._held_only(fits, res, det)
+        assert pipeline.counters["return_checks"] == 1
+        assert (held is res) == kept
+        assert pipeline.counters["unheld_directions"] == (0 if kept else 1)

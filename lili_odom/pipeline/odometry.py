@@ -56,7 +56,8 @@ from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionSc
 from lili_odom.pipeline.detection_worker import PENDING, DetectionWorker
 from lili_odom.pipeline.plane_refinement import (PlaneFitCache, PlaneRefinement,
                                                  PlaneRefinementConfig, plane_cost,
-                                                 refine_in_subspace)
+                                                 refine_in_subspace, returned_directions,
+                                                 without_unheld)
 from lili_odom.pipeline.remap import constrained_registration
 from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig, deskew_motion
 from lili_odom.pipeline.start_speed import StartSpeedConfig, forward_speed
@@ -478,6 +479,8 @@ class OdometryPipeline:
             if refine.predicted_start and wheel_prediction() is None:
                 refined = self._refined_from_prediction(planes, refined, measured, guess,
                                                         degeneracy)
+            if refine.return_check and refined.ok and wheel_prediction() is None:
+                refined = self._held_only(planes, refined, degeneracy)
             if refined.ok:
                 degeneracy, info, held = self._clear_held_directions(degeneracy, refined)
                 measured = refined.pose
@@ -836,6 +839,26 @@ class OdometryPipeline:
                 return refined
         self.counters["refined_from_prediction"] += 1
         return other
+
+    def _held_only(self, planes: PlaneFitCache, refined: PlaneRefinement,
+                   degeneracy: DegeneracyResult) -> PlaneRefinement:
+        """``refined`` without the information along the directions of its subspace it does
+        not come back along when moved (``plane_refinement.return_check``,
+        :func:`lili_odom.pipeline.plane_refinement.returned_directions`).
+
+        Run on scans without wheel data, where that information alone holds the fused pose
+        along the subspace against the IMU: information without a return (planes whose tilt
+        follows the sampling pattern) holds the point-to-point registration's lag and
+        slows the fused motion down scan after scan.
+        """
+        cfg = self.config.plane_refinement
+        rows, ratios = returned_directions(planes.points, planes.reference, refined,
+                                           degeneracy.characteristic_length, cfg)
+        self.counters["return_checks"] += int(np.count_nonzero(ratios))
+        held = without_unheld(refined, rows, ratios, cfg.max_return_ratio)
+        if held is not refined:
+            self.counters["unheld_directions"] += int(held.details["unheld"])
+        return held
 
     def _travel(self, guess: np.ndarray) -> np.ndarray:
         """Predicted translation [m] of the LiDAR since the previous output (odometry frame)."""

@@ -38,7 +38,7 @@ the returned information is (k, k) over the subspace coordinates ``c`` [1/m^2] a
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -47,8 +47,13 @@ from lili_odom.degeneracy.reference import ReferenceMap, kdtree_workers
 from lili_odom.degeneracy.subspace import orthonormal_rows
 
 __all__ = ["PlaneFitCache", "PlaneFits", "PlaneRefinementConfig", "PlaneRefinement", "eigenvector3",
-           "fit_planes", "plane_cost", "plane_jacobians", "refine_in_subspace"]
+           "fit_planes", "plane_cost", "plane_jacobians", "refine_in_subspace",
+           "returned_directions", "without_unheld"]
 
+
+#: Information [1/m^2] (a 1 m sigma) below which :func:`returned_directions` does not test a
+#: direction.
+MIN_TESTED_INFORMATION = 1.0
 
 #: Values of ``PlaneRefinementConfig.refine_constrained``.
 REFINE_CONSTRAINED = ("off", "all", "planar")
@@ -127,6 +132,18 @@ class PlaneRefinementConfig:
             from the fused prediction's components there and kept when it fits the planes
             better and they hold every direction of the subspace to
             ``min_along_information``; default True.
+        return_check: without wheel data, each direction of the refined subspace is tested
+            the way LiLi tests the registration (:func:`returned_directions`): the refinement
+            is run again from its result moved by ``return_offset`` along the direction, on
+            planes found again there; a direction it does not come back along (it stays more
+            than ``max_return_ratio`` of the offset away) is not held by the scene, and its
+            information is dropped. Planes fitted across a sparse scan's rings on a curved
+            wall tilt with the sampling pattern: they claim information wherever the scan is
+            put and hold a point-to-point registration's lag. Default True.
+        return_offset: the offset of the return check [m, scaled twist: a rotation of
+            ``return_offset / L`` rad]; default 0.1 (the 10 cm of ``held_information``).
+        max_return_ratio: the share of ``return_offset`` a direction must come back by to
+            count as held (dimensionless, 0..1); default 0.5.
         vertical_lines: a neighbourhood that is not planar but a near-vertical line (a pole,
             a trunk, a thin mast) is used too, as two planes through the line: it holds the
             point across the line, horizontally (``_lines``). Default False: the
@@ -163,6 +180,9 @@ class PlaneRefinementConfig:
     constrained_information: float = 1000.0
     screen_detections: bool = True
     predicted_start: bool = True
+    return_check: bool = True
+    return_offset: float = 0.1
+    max_return_ratio: float = 0.5
     vertical_lines: bool = False
     min_linearity: float = 0.8
     max_line_tilt_deg: float = 20.0
@@ -195,6 +215,9 @@ class PlaneRefinementConfig:
                     0.0, 1.0)
         check_range(prefix + "constrained_information", self.constrained_information, 0.0,
                     1e12, lo_open=True)
+        check_range(prefix + "return_offset", self.return_offset, 0.0, 10.0, lo_open=True,
+                    unit="m")
+        check_range(prefix + "max_return_ratio", self.max_return_ratio, 0.0, 1.0)
         check_range(prefix + "min_linearity", self.min_linearity, 0.0, 1.0)
         check_range(prefix + "max_line_tilt_deg", self.max_line_tilt_deg, 0.0, 90.0, unit="deg")
         if self.refine_constrained not in REFINE_CONSTRAINED:
@@ -568,3 +591,58 @@ def refine_in_subspace(
     info = 0.5 * (info + info.T)
     return PlaneRefinement(pose, info, B.T @ info @ B, B, used, sigma,
                            details={"eigenvalues": np.linalg.eigvalsh(info).tolist()})
+
+
+def returned_directions(points: np.ndarray, reference: ReferenceMap, refined: PlaneRefinement,
+                        length: float, config: PlaneRefinementConfig | None = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Whether the scene holds each eigen-direction of ``refined``'s information: the
+    refinement is run again from ``refined.pose`` moved by ``return_offset`` along the
+    direction, on planes fitted again at the moved pose (the points re-associate), and the
+    share of the offset still left at its result is the direction's return ratio.
+
+    Returns ``(rows, ratios)``: the eigen-directions as rows (k, 6) of scaled LiDAR body
+    twists (the characteristic length ``length`` [m]) and their return ratios (k,)
+    (0: back at ``refined.pose``; 1 or more: stayed where it was put; inf: the moved
+    refinement found too few planes). A direction with less than ``MIN_TESTED_INFORMATION``
+    is not tested (ratio 0): it gives the fusion next to nothing either way.
+    """
+    cfg = config or PlaneRefinementConfig()
+    info = 0.5 * (refined.information + refined.information.T)
+    if not info.size:
+        return np.zeros((0, 6)), np.zeros(0)
+    w, V = np.linalg.eigh(info)
+    rows = V.T @ refined.basis_scaled
+    ratios = np.where(w < MIN_TESTED_INFORMATION, 0.0, np.inf)
+    scale_inv = np.linalg.inv(geometry.scaling_matrix(length))
+    base = geometry.orthonormalize(np.asarray(refined.pose, dtype=float))
+    for i, row in enumerate(rows):
+        if ratios[i] == 0.0:
+            continue
+        offset = cfg.return_offset * row
+        start = geometry.orthonormalize(base @ geometry.exp(scale_inv @ offset))
+        moved = refine_in_subspace(points, reference, start, refined.basis_scaled, length, cfg,
+                                   fits=fit_planes(points, reference, start, cfg))
+        if not moved.ok:
+            continue
+        left = geometry.scale_twist(geometry.log(np.linalg.inv(base) @ moved.pose), length)
+        ratios[i] = float(left @ row) / cfg.return_offset
+    return rows, ratios
+
+
+def without_unheld(refined: PlaneRefinement, rows: np.ndarray, ratios: np.ndarray,
+                   max_ratio: float) -> PlaneRefinement:
+    """``refined`` without the information along the directions ``rows`` (scaled twists,
+    inside its subspace) whose return ratio is above ``max_ratio``
+    (:func:`returned_directions`); ``refined`` itself when every direction came back."""
+    unheld = ~(np.abs(ratios) <= max_ratio)
+    if not unheld.any():
+        return refined
+    U = rows[unheld] @ refined.basis_scaled.T  # (u, k) in the subspace coordinates
+    P = np.eye(len(refined.information)) - U.T @ np.linalg.pinv(U @ U.T) @ U
+    info = P @ refined.information @ P
+    info = 0.5 * (info + info.T)
+    B = refined.basis_scaled
+    details = {**refined.details, "unheld": int(unheld.sum())}
+    return replace(refined, information=info, information_scaled=B.T @ info @ B,
+                   details=details)
