@@ -679,3 +679,24 @@ def test_without_wheels_the_pipeline_drops_information_that_does_not_come_back()
         assert pipeline.counters["return_checks"] == 1
         assert (held is res) == kept
         assert pipeline.counters["unheld_directions"] == (0 if kept else 1)
+
+
+def test_without_wheels_a_direction_the_prediction_does_not_come_back_along_is_dropped():
+    # the registration 10 cm behind the prediction: between end walls the refinement from the
+    # prediction comes back to the registration's; on the sawtooth it stays on its own tooth
+    closed = corridor(40.0, end_walls=True)
+    pipeline = _pipeline_over(closed, 24.9)
+    first, chosen = _refined_from(pipeline, closed, 25.0, 24.99, 25.09)
+    assert pipeline.counters["return_checks"] == 1 and pipeline.counters["unheld_directions"] == 0
+    assert chosen is first and chosen.information[0, 0] > 100.0
+    toothed = toothed_tube()
+    pipeline = _pipeline_over(toothed, 99.9)
+    first, chosen = _refined_from(pipeline, toothed, 100.0, 100.0, 100.1)
+    assert first.information[0, 0] > 100.0
+    assert pipeline.counters["return_checks"] == 1 and pipeline.counters["unheld_directions"] == 1
+    assert np.allclose(chosen.information, 0.0) and np.array_equal(chosen.pose, first.pose)
+    # with the check off the information stays
+    pipeline = _pipeline_over(toothed, 99.9)
+    pipeline.config.plane_refinement.return_check = "off"
+    first, chosen = _refined_from(pipeline, toothed, 100.0, 100.0, 100.1)
+    assert chosen is first and pipeline.counters["return_checks"] == 0

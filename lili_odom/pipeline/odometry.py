@@ -54,10 +54,10 @@ from lili_odom.fusion.estimator import FusionEstimator, SubspaceMeasurement
 from lili_odom.fusion.subspace import remap_pose, scaled_lidar_to_base
 from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionScheduleConfig
 from lili_odom.pipeline.detection_worker import PENDING, DetectionWorker
-from lili_odom.pipeline.plane_refinement import (PlaneFitCache, PlaneRefinement,
-                                                 PlaneRefinementConfig, plane_cost,
-                                                 refine_in_subspace, returned_directions,
-                                                 without_unheld)
+from lili_odom.pipeline.plane_refinement import (MIN_TESTED_INFORMATION, PlaneFitCache,
+                                                 PlaneRefinement, PlaneRefinementConfig,
+                                                 plane_cost, refine_in_subspace,
+                                                 returned_directions, without_unheld)
 from lili_odom.pipeline.remap import constrained_registration
 from lili_odom.pipeline.scan_matcher import ScanMatcher, ScanMatcherConfig, deskew_motion
 from lili_odom.pipeline.start_speed import StartSpeedConfig, forward_speed
@@ -479,7 +479,7 @@ class OdometryPipeline:
             if refine.predicted_start and wheel_prediction() is None:
                 refined = self._refined_from_prediction(planes, refined, measured, guess,
                                                         degeneracy)
-            if refine.return_check and refined.ok and wheel_prediction() is None:
+            if refine.return_check == "offset" and refined.ok and wheel_prediction() is None:
                 refined = self._held_only(planes, refined, degeneracy)
             if refined.ok:
                 degeneracy, info, held = self._clear_held_directions(degeneracy, refined)
@@ -831,14 +831,42 @@ class OdometryPipeline:
                 and np.all(np.isfinite(other.information))):
             return refined
         if np.linalg.eigvalsh(other.information)[0] < refine.min_along_information:
-            return refined
+            return self._met(refined, other, measured, start, degeneracy)
         if refined.ok:
             cost = [plane_cost(fits_registration, r.pose, refine)
                     + plane_cost(fits_prediction, r.pose, refine) for r in (refined, other)]
             if not cost[1] < cost[0]:
-                return refined
+                return self._met(refined, other, measured, start, degeneracy)
         self.counters["refined_from_prediction"] += 1
         return other
+
+    def _met(self, refined: PlaneRefinement, other: PlaneRefinement, measured: np.ndarray,
+             start: np.ndarray, degeneracy: DegeneracyResult) -> PlaneRefinement:
+        """``refined`` (started at the registration ``measured``) without its information
+        along the direction from ``measured`` to the prediction's start ``start`` when the
+        refinement started there (``other``, on planes found there) did not come back to it
+        by ``max_return_ratio`` of that distance (``return_check`` ``prediction``): the
+        planes do not settle where the registration and the prediction disagree."""
+        cfg = self.config.plane_refinement
+        if cfg.return_check != "prediction" or not refined.ok:
+            return refined
+        length = degeneracy.characteristic_length
+        B = refined.basis_scaled
+        apart = B @ geometry.scale_twist(geometry.log(np.linalg.inv(measured) @ start), length)
+        gap = float(np.linalg.norm(apart))
+        if gap <= 0.0:
+            return refined
+        u = apart / gap
+        if float(u @ refined.information @ u) < MIN_TESTED_INFORMATION:
+            return refined  # nothing to drop along it
+        left = B @ geometry.scale_twist(geometry.log(np.linalg.inv(refined.pose) @ other.pose),
+                                        length)
+        ratio = float(left @ u) / gap
+        self.counters["return_checks"] += 1
+        held = without_unheld(refined, (u @ B)[None, :], np.array([ratio]), cfg.max_return_ratio)
+        if held is not refined:
+            self.counters["unheld_directions"] += 1
+        return held
 
     def _held_only(self, planes: PlaneFitCache, refined: PlaneRefinement,
                    degeneracy: DegeneracyResult) -> PlaneRefinement:

@@ -55,6 +55,9 @@ __all__ = ["PlaneFitCache", "PlaneFits", "PlaneRefinementConfig", "PlaneRefineme
 #: direction.
 MIN_TESTED_INFORMATION = 1.0
 
+#: Values of ``PlaneRefinementConfig.return_check``.
+RETURN_CHECKS = ("off", "prediction", "offset")
+
 #: Values of ``PlaneRefinementConfig.refine_constrained``.
 REFINE_CONSTRAINED = ("off", "all", "planar")
 
@@ -132,18 +135,24 @@ class PlaneRefinementConfig:
             from the fused prediction's components there and kept when it fits the planes
             better and they hold every direction of the subspace to
             ``min_along_information``; default True.
-        return_check: without wheel data, each direction of the refined subspace is tested
-            the way LiLi tests the registration (:func:`returned_directions`): the refinement
-            is run again from its result moved by ``return_offset`` along the direction, on
-            planes found again there; a direction it does not come back along (it stays more
-            than ``max_return_ratio`` of the offset away) is not held by the scene, and its
-            information is dropped. Planes fitted across a sparse scan's rings on a curved
-            wall tilt with the sampling pattern: they claim information wherever the scan is
-            put and hold a point-to-point registration's lag. Default True.
-        return_offset: the offset of the return check [m, scaled twist: a rotation of
-            ``return_offset / L`` rad]; default 0.1 (the 10 cm of ``held_information``).
-        max_return_ratio: the share of ``return_offset`` a direction must come back by to
-            count as held (dimensionless, 0..1); default 0.5.
+        return_check: on scans without wheel data, test whether the planes hold the
+            directions whose information the fusion gets, the way LiLi tests a registration
+            (moved, re-associated, does it come back): ``prediction`` (default): where the
+            refinement from the prediction (``predicted_start``) is not kept, the direction
+            from the registration to the prediction loses its information unless that
+            refinement came back to the registration's by ``max_return_ratio`` of the
+            distance (no extra plane fits); ``offset``: every direction of the subspace with
+            information is moved by ``return_offset`` from the result, on planes found again
+            there (:func:`returned_directions`); ``off``. Planes fitted across a sparse
+            scan's rings on a curved wall tilt with the sampling pattern: they claim
+            information wherever the scan is put, and hold a point-to-point registration's
+            lag behind the motion.
+        return_offset: how far the ``offset`` return check moves the result [m, scaled
+            twist: a rotation of ``return_offset / L`` rad]; default 0.1 (the 10 cm of
+            ``held_information``).
+        max_return_ratio: the share of the distance moved (the offset, or the registration
+            to the prediction) a refinement must come back by for the direction to count as
+            held (dimensionless, 0..1); default 0.5.
         vertical_lines: a neighbourhood that is not planar but a near-vertical line (a pole,
             a trunk, a thin mast) is used too, as two planes through the line: it holds the
             point across the line, horizontally (``_lines``). Default False: the
@@ -180,7 +189,7 @@ class PlaneRefinementConfig:
     constrained_information: float = 1000.0
     screen_detections: bool = True
     predicted_start: bool = True
-    return_check: bool = True
+    return_check: str = "prediction"
     return_offset: float = 0.1
     max_return_ratio: float = 0.5
     vertical_lines: bool = False
@@ -220,6 +229,9 @@ class PlaneRefinementConfig:
         check_range(prefix + "max_return_ratio", self.max_return_ratio, 0.0, 1.0)
         check_range(prefix + "min_linearity", self.min_linearity, 0.0, 1.0)
         check_range(prefix + "max_line_tilt_deg", self.max_line_tilt_deg, 0.0, 90.0, unit="deg")
+        if self.return_check not in RETURN_CHECKS:
+            raise ValueError(f"{prefix}return_check must be one of "
+                             f"{', '.join(RETURN_CHECKS)}, got '{self.return_check}'")
         if self.refine_constrained not in REFINE_CONSTRAINED:
             raise ValueError(f"{prefix}refine_constrained must be one of "
                              f"{', '.join(REFINE_CONSTRAINED)}, got '{self.refine_constrained}'")
