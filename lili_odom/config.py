@@ -267,7 +267,10 @@ def flatten(obj: Any, prefix: str = "") -> dict[str, Any]:
 
 def coerce_parameter(name: str, value: Any, current: Any) -> Any:
     """``value`` of parameter ``name`` converted to the type of its ``current`` value (bool,
-    int, float, str, list of floats); ValueError naming the parameter when it does not fit."""
+    int, float, str, list of floats); ValueError naming the parameter when it does not fit.
+
+    A boolean where a string is expected is read as ``off`` / ``on``: YAML 1.1 (ROS 2
+    parameter files, ``--set``) reads an unquoted ``off`` as false."""
     if isinstance(current, bool):
         if not isinstance(value, bool):
             raise ValueError(f"parameter '{name}' must be true or false, got {value!r}")
@@ -281,6 +284,8 @@ def coerce_parameter(name: str, value: Any, current: Any) -> Any:
             raise ValueError(f"parameter '{name}' must be a finite number, got {value!r}")
         return float(value)
     if isinstance(current, str):
+        if isinstance(value, bool):
+            return "on" if value else "off"
         if not isinstance(value, str):
             raise ValueError(f"parameter '{name}' must be a string, got {value!r}")
         return value

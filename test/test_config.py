@@ -107,6 +107,19 @@ def test_apply_overrides_reads_yaml_scalars_below_the_prefix() -> None:
         apply_overrides(NodeConfig(), {"lili.return_ratio": "2.0"})
 
 
+def test_an_unquoted_off_reads_as_the_off_value_of_a_string_parameter() -> None:
+    from lili_odom.config import NodeConfig, apply_overrides
+
+    cfg = apply_overrides(NodeConfig(), {"plane_refinement.return_check": "off",
+                                         "plane_refinement.refine_constrained": "off"})
+    cfg.validate()
+    assert cfg.pipeline.plane_refinement.return_check == "off"
+    assert cfg.pipeline.plane_refinement.refine_constrained == "off"
+    with pytest.raises(ValueError, match="return_check"):  # "on" is not one of its values
+        bad = apply_overrides(NodeConfig(), {"plane_refinement.return_check": "true"})
+        bad.validate()
+
+
 SHIPPED = sorted([ROOT / "config" / "deterministic.yaml",
                   *(ROOT / "benchmarks" / "configs").glob("*.yaml")])
 
