@@ -675,7 +675,7 @@ def test_without_wheels_the_pipeline_drops_information_that_does_not_come_back()
         start = pose_at(x + 0.01)
         res = refine_in_subspace(fits.points, fits.reference, start, AXIS_X, 10.0,
                                  pipeline.config.plane_refinement, fits=fits.at(start))
-        held = pipeline._held_only(fits, res, det)
+        held = pipeline._checked_by_offset(fits, res, det)
         assert pipeline.counters["return_checks"] == 1
         assert (held is res) == kept
         assert pipeline.counters["unheld_directions"] == (0 if kept else 1)

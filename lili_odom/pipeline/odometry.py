@@ -480,7 +480,7 @@ class OdometryPipeline:
                 refined = self._refined_from_prediction(planes, refined, measured, guess,
                                                         degeneracy)
             if refine.return_check == "offset" and refined.ok and wheel_prediction() is None:
-                refined = self._held_only(planes, refined, degeneracy)
+                refined = self._checked_by_offset(planes, refined, degeneracy)
             if refined.ok:
                 degeneracy, info, held = self._clear_held_directions(degeneracy, refined)
                 measured = refined.pose
@@ -831,17 +831,20 @@ class OdometryPipeline:
                 and np.all(np.isfinite(other.information))):
             return refined
         if np.linalg.eigvalsh(other.information)[0] < refine.min_along_information:
-            return self._met(refined, other, measured, start, degeneracy)
+            return self._checked_against_prediction(refined, other, measured, start,
+                                                    degeneracy)
         if refined.ok:
             cost = [plane_cost(fits_registration, r.pose, refine)
                     + plane_cost(fits_prediction, r.pose, refine) for r in (refined, other)]
             if not cost[1] < cost[0]:
-                return self._met(refined, other, measured, start, degeneracy)
+                return self._checked_against_prediction(refined, other, measured, start,
+                                                    degeneracy)
         self.counters["refined_from_prediction"] += 1
         return other
 
-    def _met(self, refined: PlaneRefinement, other: PlaneRefinement, measured: np.ndarray,
-             start: np.ndarray, degeneracy: DegeneracyResult) -> PlaneRefinement:
+    def _checked_against_prediction(self, refined: PlaneRefinement, other: PlaneRefinement,
+                                    measured: np.ndarray, start: np.ndarray,
+                                    degeneracy: DegeneracyResult) -> PlaneRefinement:
         """``refined`` (started at the registration ``measured``) without its information
         along the direction from ``measured`` to the prediction's start ``start`` when the
         refinement started there (``other``, on planes found there) did not come back to it
@@ -868,7 +871,7 @@ class OdometryPipeline:
             self.counters["unheld_directions"] += 1
         return held
 
-    def _held_only(self, planes: PlaneFitCache, refined: PlaneRefinement,
+    def _checked_by_offset(self, planes: PlaneFitCache, refined: PlaneRefinement,
                    degeneracy: DegeneracyResult) -> PlaneRefinement:
         """``refined`` without the information along the directions of its subspace it does
         not come back along when moved (``plane_refinement.return_check``,

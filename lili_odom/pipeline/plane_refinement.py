@@ -137,10 +137,10 @@ class PlaneRefinementConfig:
             ``min_along_information``; default True.
         return_check: on scans without wheel data, test whether the planes hold the
             directions whose information the fusion gets, the way LiLi tests a registration
-            (moved, re-associated, does it come back): ``prediction`` (default): where the
-            refinement from the prediction (``predicted_start``) is not kept, the direction
-            from the registration to the prediction loses its information unless that
-            refinement came back to the registration's by ``max_return_ratio`` of the
+            (moved, re-associated, does it come back): ``prediction`` (default; acts with
+            ``predicted_start``): where the refinement from the prediction is not kept, the
+            direction from the registration to the prediction loses its information unless
+            that refinement came back to the registration's by ``max_return_ratio`` of the
             distance (no extra plane fits); ``offset``: every direction of the subspace with
             information is moved by ``return_offset`` from the result, on planes found again
             there (:func:`returned_directions`); ``off``. Planes fitted across a sparse
