@@ -17,7 +17,8 @@ data where the refinement also ran from the prediction (``plane_refinement.predi
 how far each pose is ahead of the previous fused pose along the true direction of travel [cm]:
 the registration refined inside the subspace, and the refinement from the prediction, its
 start and its end (does it come back to the registration's?). ``--config`` runs the defaults
-with a parameter file over them. Appends a section to ``benchmarks/results/outage_window.md`` (``--out``).
+with a parameter file over them. Appends a section to
+``benchmarks/results/outage_window.md`` (``--out``).
 """
 from __future__ import annotations
 
