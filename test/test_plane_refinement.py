@@ -265,6 +265,28 @@ def test_a_screened_scan_passes_the_weak_check_without_computing_it_again(monkey
     assert len(calls) == 2
 
 
+
+def test_a_screened_scan_leaves_the_travel_to_the_constrained_refinement():
+    from dataclasses import replace
+
+    room = corridor(12.0, end_walls=True)
+    pipeline = _pipeline_over(room, 5.9)
+    pipeline._detector = _NoDetector()
+    here, scan = pose_at(6.0), scan_at(room, 6.0)
+    fits = planes(pipeline, scan)
+    behind = pose_at(5.95)  # a registration left 5 cm behind
+    screened = pipeline._screen(scan, behind, fits)
+    assert screened is not None
+    assert pipeline._along_track(fits, behind, here, screened) is None
+    refined = pipeline._refine_constrained(fits, behind, screened)
+    assert abs(refined[0, 3] - 6.0) < 0.01  # the travel is refined there
+    # carried over from another scan, or with the constrained refinement off, it runs
+    carried = replace(screened, details={**screened.details, "reused": True})
+    assert pipeline._along_track(fits, behind, here, carried).ok
+    pipeline.config.plane_refinement.refine_constrained = "off"
+    assert pipeline._along_track(fits, behind, here, screened).ok
+
+
 def test_along_track_covers_the_travel_outside_a_detected_subspace():
     from lili_odom.degeneracy.result import DegeneracyResult
 

@@ -944,7 +944,10 @@ class OdometryPipeline:
     def _along_track(self, planes: PlaneFitCache, pose: np.ndarray, guess: np.ndarray,
                      degeneracy: DegeneracyResult):
         """Point-to-plane along the direction of travel where the detector found it
-        constrained (``plane_refinement.along_track``), or None when it does not apply.
+        constrained (``plane_refinement.along_track``), or None when it does not apply: no
+        travel, or a scan its planes hold in every direction to ``constrained_information``
+        (this scan's screen), where the constrained refinement
+        (:meth:`_refine_constrained`) takes the full step along the travel anyway.
 
         The direction is the predicted translation since the previous scan (LiDAR frame)
         without its part inside the detected subspace (scaled twists, characteristic length
@@ -963,6 +966,9 @@ class OdometryPipeline:
         cfg = self.config.plane_refinement
         if not (cfg.enabled and cfg.along_track):
             return None
+        if (cfg.refine_constrained != "off" and _screened_here(degeneracy)
+                and degeneracy.details["min_information"] >= cfg.constrained_information):
+            return None  # every direction holds: the constrained refinement takes the step
         travel = pose[:3, :3].T @ self._travel(guess)
         n = float(np.linalg.norm(travel))
         if n < cfg.min_travel_m:
