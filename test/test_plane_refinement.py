@@ -671,6 +671,25 @@ def test_only_the_directions_that_did_not_come_back_lose_their_information():
                        np.diag([400.0, 0.0]))
 
 
+def test_bounds_cap_an_unheld_direction_instead_of_dropping_it():
+    from lili_odom.pipeline.plane_refinement import PlaneRefinement
+
+    B = np.vstack([AXIS_X, AXIS_Y])
+    info = np.array([[400.0, 30.0], [30.0, 900.0]])
+    res = PlaneRefinement(np.eye(4), info, B.T @ info @ B, B)
+    rows = np.vstack([AXIS_Y, AXIS_X])
+    ratios = np.array([2.0, 0.1])  # y did not come back, x did
+    held = without_unheld(res, rows, ratios, 0.5, bounds=np.array([100.0, 5.0]))
+    # y capped at 100 m^-2 (a 10 cm sigma), its coupling to x gone, x untouched
+    assert np.allclose(held.information, np.diag([400.0, 100.0]))
+    assert np.allclose(held.information_scaled, B.T @ held.information @ B)
+    # a bound above what the direction had leaves its own information, without the coupling
+    loose = without_unheld(res, rows, ratios, 0.5, bounds=np.array([1e6, 1e6]))
+    assert np.allclose(loose.information, np.diag([400.0, 900.0]))
+    assert np.allclose(without_unheld(res, rows, ratios, 0.5, bounds=np.zeros(2)).information,
+                       without_unheld(res, rows, ratios, 0.5).information)
+
+
 def test_a_direction_without_information_is_not_tested(monkeypatch):
     import lili_odom.pipeline.plane_refinement as plane_refinement
 

@@ -849,9 +849,11 @@ class OdometryPipeline:
         along the direction from ``measured`` to the prediction's start ``start`` when the
         refinement started there (``other``, on planes found there) did not come back to it
         by ``max_return_ratio`` of that distance (``return_check`` ``prediction``): the
-        planes do not settle where the registration and the prediction disagree."""
+        planes do not settle where the registration and the prediction disagree. With
+        ``bounded`` it keeps at most ``1 / d^2`` there, ``d`` how far apart the two
+        refinements ended along it [m, scaled]."""
         cfg = self.config.plane_refinement
-        if cfg.return_check != "prediction" or not refined.ok:
+        if cfg.return_check not in ("prediction", "bounded") or not refined.ok:
             return refined
         length = degeneracy.characteristic_length
         B = refined.basis_scaled
@@ -866,7 +868,12 @@ class OdometryPipeline:
                                         length)
         ratio = float(left @ u) / gap
         self.counters["return_checks"] += 1
-        held = without_unheld(refined, (u @ B)[None, :], np.array([ratio]), cfg.max_return_ratio)
+        bounds = None
+        if cfg.return_check == "bounded":
+            apart_end = abs(ratio) * gap
+            bounds = np.array([1.0 / apart_end**2 if apart_end > 0 else np.inf])
+        held = without_unheld(refined, (u @ B)[None, :], np.array([ratio]), cfg.max_return_ratio,
+                              bounds)
         if held is not refined:
             self.counters["unheld_directions"] += 1
         return held

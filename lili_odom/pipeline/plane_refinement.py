@@ -56,7 +56,7 @@ __all__ = ["PlaneFitCache", "PlaneFits", "PlaneRefinementConfig", "PlaneRefineme
 MIN_TESTED_INFORMATION = 1.0
 
 #: Values of ``PlaneRefinementConfig.return_check``.
-RETURN_CHECKS = ("off", "prediction", "offset")
+RETURN_CHECKS = ("off", "prediction", "bounded", "offset")
 
 #: Values of ``PlaneRefinementConfig.refine_constrained``.
 REFINE_CONSTRAINED = ("off", "all", "planar")
@@ -141,7 +141,11 @@ class PlaneRefinementConfig:
             ``predicted_start``): where the refinement from the prediction is not kept, the
             direction from the registration to the prediction loses its information unless
             that refinement came back to the registration's by ``max_return_ratio`` of the
-            distance (no extra plane fits); ``offset``: every direction of the subspace with
+            distance (no extra plane fits); ``bounded``: as ``prediction``, but such a
+            direction keeps at most ``1 / d^2`` of information, ``d`` how far apart the two
+            refinements ended along it [m, scaled] (the planes place the scan no better than
+            that, and without wheels over a long stretch it is all that holds the
+            direction); ``offset``: every direction of the subspace with
             information is moved by ``return_offset`` from the result, on planes found again
             there (:func:`returned_directions`); ``off``. Planes fitted across a sparse
             scan's rings on a curved wall tilt with the sampling pattern: they claim
@@ -643,16 +647,24 @@ def returned_directions(points: np.ndarray, reference: ReferenceMap, refined: Pl
 
 
 def without_unheld(refined: PlaneRefinement, rows: np.ndarray, ratios: np.ndarray,
-                   max_ratio: float) -> PlaneRefinement:
-    """``refined`` without the information along the directions ``rows`` (scaled twists,
-    inside its subspace) whose return ratio is above ``max_ratio``
-    (:func:`returned_directions`); ``refined`` itself when every direction came back."""
+                   max_ratio: float, bounds: np.ndarray | None = None) -> PlaneRefinement:
+    """``refined`` without the information along the directions ``rows`` (orthonormal rows
+    of scaled twists inside its subspace) whose return ratio is above ``max_ratio``
+    (:func:`returned_directions`); ``refined`` itself when every direction came back.
+
+    ``bounds`` (one per row, [1/m^2]): instead of losing it, an unheld direction keeps its
+    information up to its bound."""
     unheld = ~(np.abs(ratios) <= max_ratio)
     if not unheld.any():
         return refined
     U = rows[unheld] @ refined.basis_scaled.T  # (u, k) in the subspace coordinates
     P = np.eye(len(refined.information)) - U.T @ np.linalg.pinv(U @ U.T) @ U
     info = P @ refined.information @ P
+    if bounds is not None:
+        for u, bound in zip(U, np.asarray(bounds, dtype=float)[unheld]):
+            u = u / np.linalg.norm(u)
+            kept = min(float(u @ refined.information @ u), max(float(bound), 0.0))
+            info = info + kept * np.outer(u, u)
     info = 0.5 * (info + info.T)
     B = refined.basis_scaled
     details = {**refined.details, "unheld": int(unheld.sum())}
