@@ -99,14 +99,29 @@ def test_without_wheel_data_the_subspace_information_takes_its_factor(featureles
     np.testing.assert_allclose(first_subspace_information(0.25, wheels=True), with_wheels)
 
 
-@pytest.mark.parametrize("wheels", [False, True])
-def test_the_return_check_runs_on_scans_without_wheel_data_only(featureless_bag, wheels):
+@pytest.mark.parametrize("wheels, window, checked", [(True, 30.0, False), (False, 30.0, False),
+                                                     (False, np.inf, True)])
+def test_the_return_check_runs_without_wheel_data_within_its_window(featureless_bag, wheels,
+                                                                   window, checked):
     """``plane_refinement.return_check`` tests the subspace information of scans without
-    wheel data; with wheels the refinement starts at their prediction and is not tested."""
+    wheel data whose newest wheel data is at most ``return_check_window_s`` old; with wheels
+    the refinement starts at their prediction, and without any wheel data the LiDAR keeps
+    its information (the IMU was never calibrated against wheels)."""
     config = NodeConfig()
     config.pipeline.method = "lili"
+    config.pipeline.plane_refinement.return_check_window_s = window
     counters = _replay_first_scans(featureless_bag, config, wheels).pipeline.counters
-    if wheels:
-        assert counters["return_checks"] == 0
-    else:
-        assert counters["return_checks"] > 0
+    assert (counters["return_checks"] > 0) == checked
+
+
+def test_the_return_check_window_counts_from_the_newest_wheel_data():
+    from lili_odom.pipeline.odometry import OdometryPipeline
+
+    config = NodeConfig()
+    pipeline = OdometryPipeline(config.pipeline)
+    assert not pipeline._wheels_recent(100.0)  # no wheel data yet
+    pipeline.estimator.wheels.add(100.0, np.eye(4))
+    assert pipeline._wheels_recent(100.0) and pipeline._wheels_recent(130.0)
+    assert not pipeline._wheels_recent(130.5)
+    config.pipeline.plane_refinement.return_check_window_s = np.inf
+    assert OdometryPipeline(config.pipeline)._wheels_recent(1e9)  # with or without data

@@ -476,10 +476,11 @@ class OdometryPipeline:
                                          degeneracy.basis_scaled,
                                          degeneracy.characteristic_length, refine,
                                          fits=planes.at(measured))
+            returns = wheel_prediction() is None and self._wheels_recent(t_ref)
             if refine.predicted_start and wheel_prediction() is None:
                 refined = self._refined_from_prediction(planes, refined, measured, guess,
-                                                        degeneracy)
-            if refine.return_check == "offset" and refined.ok and wheel_prediction() is None:
+                                                        degeneracy, returns)
+            if refine.return_check == "offset" and refined.ok and returns:
                 refined = self._checked_by_offset(planes, refined, degeneracy)
             if refined.ok:
                 degeneracy, info, held = self._clear_held_directions(degeneracy, refined)
@@ -803,7 +804,8 @@ class OdometryPipeline:
 
     def _refined_from_prediction(self, planes: PlaneFitCache, refined: PlaneRefinement,
                                  measured: np.ndarray, guess: np.ndarray,
-                                 degeneracy: DegeneracyResult) -> PlaneRefinement:
+                                 degeneracy: DegeneracyResult,
+                                 check_return: bool = True) -> PlaneRefinement:
         """Without wheel data, the refinement inside the subspace run again from the
         prediction's components there (``guess``, the fused motion model), and the one of the
         two whose pose fits the planes better kept (:func:`plane_cost` on both starts' planes).
@@ -815,7 +817,9 @@ class OdometryPipeline:
         prediction it finds them. The prediction's refinement is kept only when the planes hold
         every direction of the subspace there (``min_along_information``) and fit better;
         where they hold nothing (a featureless tunnel) both fit alike, and keeping the
-        prediction would only confirm the fused velocity, so the registration's stays.
+        prediction would only confirm the fused velocity, so the registration's stays, and
+        with ``check_return`` its information is checked against the prediction's
+        (:meth:`_checked_against_prediction`).
         """
         refine = self.config.plane_refinement
         start = remap_pose(measured, guess, degeneracy.basis_scaled,
@@ -832,28 +836,31 @@ class OdometryPipeline:
             return refined
         if np.linalg.eigvalsh(other.information)[0] < refine.min_along_information:
             return self._checked_against_prediction(refined, other, measured, start,
-                                                    degeneracy)
+                                                    degeneracy, check_return)
         if refined.ok:
             cost = [plane_cost(fits_registration, r.pose, refine)
                     + plane_cost(fits_prediction, r.pose, refine) for r in (refined, other)]
             if not cost[1] < cost[0]:
                 return self._checked_against_prediction(refined, other, measured, start,
-                                                    degeneracy)
+                                                        degeneracy, check_return)
         self.counters["refined_from_prediction"] += 1
         return other
 
     def _checked_against_prediction(self, refined: PlaneRefinement, other: PlaneRefinement,
                                     measured: np.ndarray, start: np.ndarray,
-                                    degeneracy: DegeneracyResult) -> PlaneRefinement:
+                                    degeneracy: DegeneracyResult,
+                                    check_return: bool = True) -> PlaneRefinement:
         """``refined`` (started at the registration ``measured``) without its information
         along the direction from ``measured`` to the prediction's start ``start`` when the
         refinement started there (``other``, on planes found there) did not come back to it
         by ``max_return_ratio`` of that distance (``return_check`` ``prediction``): the
         planes do not settle where the registration and the prediction disagree. With
         ``bounded`` it keeps at most ``1 / d^2`` there, ``d`` how far apart the two
-        refinements ended along it [m, scaled]."""
+        refinements ended along it [m, scaled]. ``refined`` as it is without
+        ``check_return`` (no wheel data within ``return_check_window_s``)."""
         cfg = self.config.plane_refinement
-        if cfg.return_check not in ("prediction", "bounded") or not refined.ok:
+        checking = cfg.return_check in ("prediction", "bounded") and check_return
+        if not (checking and refined.ok):
             return refined
         length = degeneracy.characteristic_length
         B = refined.basis_scaled
@@ -877,6 +884,16 @@ class OdometryPipeline:
         if held is not refined:
             self.counters["unheld_directions"] += 1
         return held
+
+    def _wheels_recent(self, t: float) -> bool:
+        """True when the newest wheel data is at most ``return_check_window_s`` older than
+        ``t`` [s] (the window in which the return check may leave a direction to the IMU);
+        always with an infinite window."""
+        window = self.config.plane_refinement.return_check_window_s
+        if window == float("inf"):
+            return True
+        newest = self.estimator.wheels.newest_time
+        return newest is not None and t - newest <= window
 
     def _checked_by_offset(self, planes: PlaneFitCache, refined: PlaneRefinement,
                    degeneracy: DegeneracyResult) -> PlaneRefinement:

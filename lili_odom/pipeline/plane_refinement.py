@@ -151,6 +151,12 @@ class PlaneRefinementConfig:
             scan's rings on a curved wall tilt with the sampling pattern: they claim
             information wherever the scan is put, and hold a point-to-point registration's
             lag behind the motion.
+        return_check_window_s: the return check runs only on scans within this many seconds
+            of the newest wheel data [s]: a direction it takes from the LiDAR is left to the
+            IMU, which carries it only while its calibration against the wheels is recent;
+            without wheel data for longer, or ever, the LiDAR keeps its information (on open
+            ground it is all that holds the direction of travel). Default 30; inf: on every
+            scan without wheel data.
         return_offset: how far the ``offset`` return check moves the result [m, scaled
             twist: a rotation of ``return_offset / L`` rad]; default 0.1 (the 10 cm of
             ``held_information``).
@@ -194,6 +200,7 @@ class PlaneRefinementConfig:
     screen_detections: bool = True
     predicted_start: bool = True
     return_check: str = "prediction"
+    return_check_window_s: float = 30.0
     return_offset: float = 0.1
     max_return_ratio: float = 0.5
     vertical_lines: bool = False
@@ -228,6 +235,8 @@ class PlaneRefinementConfig:
                     0.0, 1.0)
         check_range(prefix + "constrained_information", self.constrained_information, 0.0,
                     1e12, lo_open=True)
+        check_range(prefix + "return_check_window_s", self.return_check_window_s, 0.0, None,
+                    unit="s")
         check_range(prefix + "return_offset", self.return_offset, 0.0, 10.0, lo_open=True,
                     unit="m")
         check_range(prefix + "max_return_ratio", self.max_return_ratio, 0.0, 1.0)
