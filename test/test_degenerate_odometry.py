@@ -99,17 +99,21 @@ def test_without_wheel_data_the_subspace_information_takes_its_factor(featureles
     np.testing.assert_allclose(first_subspace_information(0.25, wheels=True), with_wheels)
 
 
-@pytest.mark.parametrize("wheels, window, checked", [(True, 30.0, False), (False, 30.0, False),
-                                                     (False, np.inf, True)])
+@pytest.mark.parametrize("wheels, recent, checked", [(True, True, False), (False, False, False),
+                                                     (False, True, True)])
 def test_the_return_check_runs_without_wheel_data_within_its_window(featureless_bag, wheels,
-                                                                   window, checked):
+                                                                   recent, checked,
+                                                                   monkeypatch):
     """``plane_refinement.return_check`` tests the subspace information of scans without
-    wheel data whose newest wheel data is at most ``return_check_window_s`` old; with wheels
-    the refinement starts at their prediction, and without any wheel data the LiDAR keeps
-    its information (the IMU was never calibrated against wheels)."""
+    wheel data while the newest wheel data is recent (``return_check_window_s``, as in an
+    outage); with wheels the refinement starts at their prediction, and without any wheel
+    data the LiDAR keeps its information (the IMU was never calibrated against wheels)."""
+    from lili_odom.pipeline.odometry import OdometryPipeline
+
+    if recent and not wheels:  # an outage: wheel data before, none on these scans
+        monkeypatch.setattr(OdometryPipeline, "_wheels_recent", lambda self, t: True)
     config = NodeConfig()
     config.pipeline.method = "lili"
-    config.pipeline.plane_refinement.return_check_window_s = window
     counters = _replay_first_scans(featureless_bag, config, wheels).pipeline.counters
     assert (counters["return_checks"] > 0) == checked
 
@@ -117,11 +121,8 @@ def test_the_return_check_runs_without_wheel_data_within_its_window(featureless_
 def test_the_return_check_window_counts_from_the_newest_wheel_data():
     from lili_odom.pipeline.odometry import OdometryPipeline
 
-    config = NodeConfig()
-    pipeline = OdometryPipeline(config.pipeline)
+    pipeline = OdometryPipeline(NodeConfig().pipeline)
     assert not pipeline._wheels_recent(100.0)  # no wheel data yet
     pipeline.estimator.wheels.add(100.0, np.eye(4))
     assert pipeline._wheels_recent(100.0) and pipeline._wheels_recent(130.0)
     assert not pipeline._wheels_recent(130.5)
-    config.pipeline.plane_refinement.return_check_window_s = np.inf
-    assert OdometryPipeline(config.pipeline)._wheels_recent(1e9)  # with or without data

@@ -476,11 +476,11 @@ class OdometryPipeline:
                                          degeneracy.basis_scaled,
                                          degeneracy.characteristic_length, refine,
                                          fits=planes.at(measured))
-            returns = wheel_prediction() is None and self._wheels_recent(t_ref)
+            check_return = wheel_prediction() is None and self._wheels_recent(t_ref)
             if refine.predicted_start and wheel_prediction() is None:
                 refined = self._refined_from_prediction(planes, refined, measured, guess,
-                                                        degeneracy, returns)
-            if refine.return_check == "offset" and refined.ok and returns:
+                                                        degeneracy, check_return)
+            if refine.return_check == "offset" and refined.ok and check_return:
                 refined = self._checked_by_offset(planes, refined, degeneracy)
             if refined.ok:
                 degeneracy, info, held = self._clear_held_directions(degeneracy, refined)
@@ -887,12 +887,9 @@ class OdometryPipeline:
 
     def _wheels_recent(self, t: float) -> bool:
         """True when the newest wheel data is at most ``return_check_window_s`` older than
-        ``t`` [s] (the window in which the return check may leave a direction to the IMU);
-        always with an infinite window."""
-        window = self.config.plane_refinement.return_check_window_s
-        if window == float("inf"):
-            return True
+        ``t`` [s] (the window in which the return check may leave a direction to the IMU)."""
         newest = self.estimator.wheels.newest_time
+        window = self.config.plane_refinement.return_check_window_s
         return newest is not None and t - newest <= window
 
     def _checked_by_offset(self, planes: PlaneFitCache, refined: PlaneRefinement,

@@ -155,8 +155,7 @@ class PlaneRefinementConfig:
             of the newest wheel data [s]: a direction it takes from the LiDAR is left to the
             IMU, which carries it only while its calibration against the wheels is recent;
             without wheel data for longer, or ever, the LiDAR keeps its information (on open
-            ground it is all that holds the direction of travel). Default 30; inf: on every
-            scan without wheel data.
+            ground it is all that holds the direction of travel). Default 30.
         return_offset: how far the ``offset`` return check moves the result [m, scaled
             twist: a rotation of ``return_offset / L`` rad]; default 0.1 (the 10 cm of
             ``held_information``).
