@@ -426,7 +426,9 @@ class OdometryPipeline:
 
         degeneracy = None
         t0 = time.perf_counter()
-        planes = PlaneFitCache(map_points, self._matcher.reference, self.config.plane_refinement)
+        wheel_prediction = cache(partial(est.wheel_prediction, t_ref))  # at most once a scan
+        planes = PlaneFitCache(map_points, self._matcher.reference,
+                               self._plane_config(wheel_prediction() is None))
         if self._detector is not None and not reg.ok:
             self._forget_detections()
         if self._detector is not None and reg.ok and not first:
@@ -442,7 +444,6 @@ class OdometryPipeline:
         timings["detector"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
-        wheel_prediction = cache(partial(est.wheel_prediction, t_ref))  # at most once a scan
         measured = reg.pose
         if self._remaps(degeneracy):
             measured = self._remap(source, reg.pose, wheel_prediction(), degeneracy)
@@ -884,6 +885,14 @@ class OdometryPipeline:
         if held is not refined:
             self.counters["unheld_directions"] += 1
         return held
+
+    def _plane_config(self, without_wheels: bool) -> PlaneRefinementConfig:
+        """The plane fits' settings for a scan: with vertical lines on a scan without wheel
+        data when ``vertical_lines_without_wheels``."""
+        cfg = self.config.plane_refinement
+        if without_wheels and cfg.vertical_lines_without_wheels and not cfg.vertical_lines:
+            return replace(cfg, vertical_lines=True)
+        return cfg
 
     def _wheels_recent(self, t: float) -> bool:
         """True when the newest wheel data is at most ``return_check_window_s`` older than
