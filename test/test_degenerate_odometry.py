@@ -128,13 +128,13 @@ def test_the_return_check_window_counts_from_the_newest_wheel_data():
     assert not pipeline._wheels_recent(130.5)
 
 
-def test_vertical_lines_on_scans_without_wheel_data_only():
+def test_vertical_lines_on_scans_long_without_wheel_data_only():
     from lili_odom.pipeline.odometry import OdometryPipeline
 
     config = NodeConfig()
-    assert not OdometryPipeline(config.pipeline)._plane_config(True).vertical_lines
-    config.pipeline.plane_refinement.vertical_lines_without_wheels = True
     pipeline = OdometryPipeline(config.pipeline)
-    assert pipeline._plane_config(True).vertical_lines
+    assert pipeline._plane_config(True).vertical_lines  # the default
     assert pipeline._plane_config(False) is config.pipeline.plane_refinement
     assert not pipeline._plane_config(False).vertical_lines
+    config.pipeline.plane_refinement.vertical_lines_without_wheels = False
+    assert not OdometryPipeline(config.pipeline)._plane_config(True).vertical_lines

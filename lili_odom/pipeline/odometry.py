@@ -427,8 +427,9 @@ class OdometryPipeline:
         degeneracy = None
         t0 = time.perf_counter()
         wheel_prediction = cache(partial(est.wheel_prediction, t_ref))  # at most once a scan
+        long_without_wheels = wheel_prediction() is None and not self._wheels_recent(t_ref)
         planes = PlaneFitCache(map_points, self._matcher.reference,
-                               self._plane_config(wheel_prediction() is None))
+                               self._plane_config(long_without_wheels))
         if self._detector is not None and not reg.ok:
             self._forget_detections()
         if self._detector is not None and reg.ok and not first:
@@ -887,8 +888,9 @@ class OdometryPipeline:
         return held
 
     def _plane_config(self, without_wheels: bool) -> PlaneRefinementConfig:
-        """The plane fits' settings for a scan: with vertical lines on a scan without wheel
-        data when ``vertical_lines_without_wheels``."""
+        """The plane fits' settings for a scan: with vertical lines when
+        ``vertical_lines_without_wheels`` and ``without_wheels`` (no wheel data for longer
+        than ``return_check_window_s``, or none at all)."""
         cfg = self.config.plane_refinement
         if without_wheels and cfg.vertical_lines_without_wheels and not cfg.vertical_lines:
             return replace(cfg, vertical_lines=True)

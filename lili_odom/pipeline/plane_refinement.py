@@ -168,9 +168,10 @@ class PlaneRefinementConfig:
             line through the neighbours' centroid lies on the side of a pole earlier scans
             saw, up to its radius off the side this scan sees.
         vertical_lines_without_wheels: use vertical lines (as ``vertical_lines``) on scans
-            without wheel data only: there the poles and masts of open ground are what holds
-            the directions of planar motion against the IMU, while with wheels their offset
-            costs more than they add. Default False.
+            with no wheel data for longer than ``return_check_window_s``, or none at all:
+            there poles, masts and pipes are much of what holds the directions of planar
+            motion against the IMU, while with wheels, or in a short outage after them, their
+            offset costs more than they add. Default True.
         min_linearity: neighbourhoods with ``(l1 - l2) / l1`` at least this are lines
             (dimensionless); default 0.8.
         max_line_tilt_deg: lines tilted from the vertical by more than this are not used
@@ -207,7 +208,7 @@ class PlaneRefinementConfig:
     return_offset: float = 0.1
     max_return_ratio: float = 0.5
     vertical_lines: bool = False
-    vertical_lines_without_wheels: bool = False
+    vertical_lines_without_wheels: bool = True
     min_linearity: float = 0.8
     max_line_tilt_deg: float = 20.0
 
