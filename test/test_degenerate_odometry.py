@@ -107,15 +107,25 @@ def test_the_return_check_runs_without_wheel_data_within_its_window(featureless_
     """``plane_refinement.return_check`` tests the subspace information of scans without
     wheel data while the newest wheel data is recent (``return_check_window_s``, as in an
     outage); with wheels the refinement starts at their prediction, and without any wheel
-    data the LiDAR keeps its information (the IMU was never calibrated against wheels)."""
-    from lili_odom.pipeline.odometry import OdometryPipeline
+    data the LiDAR keeps its information (the IMU was never calibrated against wheels) and
+    the plane fits use vertical lines (``vertical_lines_without_wheels``)."""
+    import lili_odom.pipeline.odometry as odometry
 
     if recent and not wheels:  # an outage: wheel data before, none on these scans
-        monkeypatch.setattr(OdometryPipeline, "_wheels_recent", lambda self, t: True)
+        monkeypatch.setattr(odometry.OdometryPipeline, "_wheels_recent", lambda self, t: True)
+    lines = []
+
+    class RecordingCache(odometry.PlaneFitCache):
+        def __init__(self, points, reference, config=None):
+            super().__init__(points, reference, config)
+            lines.append(self.config.vertical_lines)
+
+    monkeypatch.setattr(odometry, "PlaneFitCache", RecordingCache)
     config = NodeConfig()
     config.pipeline.method = "lili"
     counters = _replay_first_scans(featureless_bag, config, wheels).pipeline.counters
     assert (counters["return_checks"] > 0) == checked
+    assert lines and all(used == (not recent) for used in lines)
 
 
 def test_the_return_check_window_counts_from_the_newest_wheel_data():

@@ -530,7 +530,7 @@ def _refined_from(pipeline, world, scan_x, measured_x, guess_x):
     first = refine_in_subspace(fits.points, fits.reference, measured, AXIS_X, 10.0,
                                pipeline.config.plane_refinement, fits=fits.at(measured))
     return first, pipeline._refined_from_prediction(fits, first, measured, pose_at(guess_x),
-                                                    det)
+                                                    det, check_return=True)
 
 
 def test_without_wheels_the_refinement_also_starts_at_the_prediction():

@@ -61,7 +61,7 @@ def run_window(trial: int, seed: int, start: float, duration: float, outage: flo
     from_prediction = odometry.OdometryPipeline._refined_from_prediction
     refine = odometry.refine_in_subspace
 
-    def two_starts(self, planes, refined, measured_pose, guess, degeneracy):
+    def two_starts(self, planes, refined, measured_pose, guess, degeneracy, *rest):
         calls = []
 
         def recorded(*args, **kwargs):
@@ -71,7 +71,8 @@ def run_window(trial: int, seed: int, start: float, duration: float, outage: flo
 
         odometry.refine_in_subspace = recorded
         try:
-            return from_prediction(self, planes, refined, measured_pose, guess, degeneracy)
+            return from_prediction(self, planes, refined, measured_pose, guess, degeneracy,
+                                   *rest)
         finally:
             odometry.refine_in_subspace = refine
             if calls:  # the refinement from the prediction ran

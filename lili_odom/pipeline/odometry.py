@@ -426,10 +426,9 @@ class OdometryPipeline:
 
         degeneracy = None
         t0 = time.perf_counter()
-        wheel_prediction = cache(partial(est.wheel_prediction, t_ref))  # at most once a scan
-        long_without_wheels = wheel_prediction() is None and not self._wheels_recent(t_ref)
+        wheels_recent = self._wheels_recent(t_ref)  # else there is no wheel data for this scan
         planes = PlaneFitCache(map_points, self._matcher.reference,
-                               self._plane_config(long_without_wheels))
+                               self._plane_config(not wheels_recent))
         if self._detector is not None and not reg.ok:
             self._forget_detections()
         if self._detector is not None and reg.ok and not first:
@@ -445,6 +444,7 @@ class OdometryPipeline:
         timings["detector"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
+        wheel_prediction = cache(partial(est.wheel_prediction, t_ref))  # at most once a scan
         measured = reg.pose
         if self._remaps(degeneracy):
             measured = self._remap(source, reg.pose, wheel_prediction(), degeneracy)
@@ -478,7 +478,7 @@ class OdometryPipeline:
                                          degeneracy.basis_scaled,
                                          degeneracy.characteristic_length, refine,
                                          fits=planes.at(measured))
-            check_return = wheel_prediction() is None and self._wheels_recent(t_ref)
+            check_return = wheel_prediction() is None and wheels_recent
             if refine.predicted_start and wheel_prediction() is None:
                 refined = self._refined_from_prediction(planes, refined, measured, guess,
                                                         degeneracy, check_return)
@@ -807,7 +807,7 @@ class OdometryPipeline:
     def _refined_from_prediction(self, planes: PlaneFitCache, refined: PlaneRefinement,
                                  measured: np.ndarray, guess: np.ndarray,
                                  degeneracy: DegeneracyResult,
-                                 check_return: bool = True) -> PlaneRefinement:
+                                 check_return: bool) -> PlaneRefinement:
         """Without wheel data, the refinement inside the subspace run again from the
         prediction's components there (``guess``, the fused motion model), and the one of the
         two whose pose fits the planes better kept (:func:`plane_cost` on both starts' planes).
@@ -851,7 +851,7 @@ class OdometryPipeline:
     def _checked_against_prediction(self, refined: PlaneRefinement, other: PlaneRefinement,
                                     measured: np.ndarray, start: np.ndarray,
                                     degeneracy: DegeneracyResult,
-                                    check_return: bool = True) -> PlaneRefinement:
+                                    check_return: bool) -> PlaneRefinement:
         """``refined`` (started at the registration ``measured``) without its information
         along the direction from ``measured`` to the prediction's start ``start`` when the
         refinement started there (``other``, on planes found there) did not come back to it
@@ -890,7 +890,7 @@ class OdometryPipeline:
     def _plane_config(self, without_wheels: bool) -> PlaneRefinementConfig:
         """The plane fits' settings for a scan: with vertical lines when
         ``vertical_lines_without_wheels`` and ``without_wheels`` (no wheel data for longer
-        than ``return_check_window_s``, or none at all)."""
+        than ``return_check_window_s``, or none at all: :meth:`_wheels_recent` is False)."""
         cfg = self.config.plane_refinement
         if without_wheels and cfg.vertical_lines_without_wheels and not cfg.vertical_lines:
             return replace(cfg, vertical_lines=True)
