@@ -177,6 +177,13 @@ class PlaneRefinementConfig:
         max_line_tilt_deg: lines tilted from the vertical by more than this are not used
             [deg] (a ring of a sparse scan on the ground or on a wall is a horizontal line
             that moves with the sensor); default 20.
+        line_neighbors: a line is used only if this many nearest local-map points of the
+            scan point (those within ``max_neighbor_distance``, at least
+            ``normal_neighbors``) form a near-vertical line too (``min_linearity``,
+            ``max_line_tilt_deg``): a sparse sensor driving towards a wall leaves vertical
+            strips of points at its columns' bearings, and the few nearest points of one
+            strip look like a pole while the wall's plane runs across it; 0 = no such
+            check. Default 30.
     """
 
     enabled: bool = True
@@ -211,6 +218,7 @@ class PlaneRefinementConfig:
     vertical_lines_without_wheels: bool = True
     min_linearity: float = 0.8
     max_line_tilt_deg: float = 20.0
+    line_neighbors: int = 30
 
     def validate(self, prefix: str = "plane_refinement.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -247,6 +255,7 @@ class PlaneRefinementConfig:
         check_range(prefix + "max_return_ratio", self.max_return_ratio, 0.0, 1.0)
         check_range(prefix + "min_linearity", self.min_linearity, 0.0, 1.0)
         check_range(prefix + "max_line_tilt_deg", self.max_line_tilt_deg, 0.0, 90.0, unit="deg")
+        check_range(prefix + "line_neighbors", self.line_neighbors, 0, 1000)
         if self.return_check not in RETURN_CHECKS:
             raise ValueError(f"{prefix}return_check must be one of "
                              f"{', '.join(RETURN_CHECKS)}, got '{self.return_check}'")
@@ -377,12 +386,39 @@ def _planes(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConfig
         return (valid, normals, centroids, tilt_var) + no_lines
     line, n1, n2 = _lines(cov[~good], w[~good], cfg)
     rows = sel[~good][line]
+    if cfg.line_neighbors > k and len(rows):
+        wide = _wide_lines(reference, q[rows], cfg)
+        line, n1, n2, rows = line[wide], n1[wide], n2[wide], rows[wide]
     valid[rows] = True
     normals[rows] = n1
     centroids[rows] = c[~good][line]
     wl = w[~good][line]
     tilt_var[rows] = np.maximum(wl[:, 1], 0.0) / (k * np.maximum(wl[:, 2], 1e-12))
     return valid, normals, centroids, tilt_var, rows, n2
+
+
+def _wide_lines(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConfig
+                ) -> np.ndarray:
+    """Which of the points ``q`` (odometry frame) whose nearest neighbours form a vertical
+    line still have a near-vertical line among their ``line_neighbors`` nearest local-map
+    points within ``max_neighbor_distance`` (bool mask): a pole or a pipe stays a line as the
+    neighbourhood grows, a strip of a wall becomes the wall's plane."""
+    pts = reference.points
+    k = min(cfg.line_neighbors, len(pts))
+    dist, idx = reference.kdtree.query(q, k=k, distance_upper_bound=cfg.max_neighbor_distance)
+    dist, idx = dist.reshape(len(q), k), idx.reshape(len(q), k)
+    used = np.isfinite(dist)  # missing neighbours come back as inf, index len(pts)
+    nb = pts[np.where(used, idx, 0)]  # (m, k, 3)
+    count = used.sum(axis=1)
+    weight = used / np.maximum(count, 1)[:, None]
+    c = np.einsum("mk,mkj->mj", weight, nb)
+    d = (nb - c[:, None, :]) * np.sqrt(weight)[..., None]
+    cov = np.einsum("mki,mkj->mij", d, d)
+    w, _ = symmetric_eigen3(cov)
+    line, _, _ = _lines(cov, w, cfg)
+    keep = np.zeros(len(q), dtype=bool)
+    keep[line] = True
+    return keep & (count >= cfg.normal_neighbors)
 
 
 def _lines(cov: np.ndarray, w: np.ndarray, cfg: PlaneRefinementConfig
