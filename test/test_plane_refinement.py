@@ -612,6 +612,39 @@ def test_only_near_vertical_lines_are_used(tilt_deg, used):
     assert np.allclose(np.einsum("ij,ij->i", normals[:n], normals[n:]), 0.0, atol=1e-9)
 
 
+
+def test_strips_of_a_wall_are_not_lines():
+    """A sparse sensor driving towards a wall leaves vertical strips of map points at its
+    columns' bearings: the nearest ten points of a strip form a vertical line, the wider
+    neighbourhood (``line_neighbors``) the wall's plane, which the point gets. Only without
+    that check do the strips count as poles."""
+    z = np.arange(0.0, 4.0, 0.1)
+    wall = np.vstack([np.c_[np.full_like(z, 4.0), np.full_like(z, y), z]
+                      for y in np.arange(-6.0, 6.0, 0.8)])
+    ref = ReferenceMap.from_points(wall, 1.0, 200)
+    scan = wall[::3] - [0.0, 0.0, 1.5]  # sensor frame at pose_at(0)
+    checked = fit_planes(scan, ref, pose_at(0.0),
+                         PlaneRefinementConfig(points=20000, vertical_lines=True))
+    assert PlaneRefinementConfig().line_neighbors == 30  # the default checks
+    unchecked = fit_planes(scan, ref, pose_at(0.0), PlaneRefinementConfig(
+        points=20000, vertical_lines=True, line_neighbors=0))
+    assert unchecked.valid.mean() > 0.5  # most strip points became two planes each
+    assert len(unchecked.points) > len(scan)
+    assert len(checked.points) == len(scan)  # no point on a line
+    # the strip points get the wall's plane from their wider neighbourhood (a few near the
+    # strips' ends, whose wider neighbourhood is neither line nor plane, get none)
+    assert checked.valid.mean() > 0.8
+    assert np.allclose(np.abs(checked.normals[checked.valid, 0]), 1.0, atol=1e-6)
+    # a pole stays a line with the check: its wider neighbourhood is the pole too
+    world = poles_on_ground()
+    pole = world[world[:, 2] > 1.0]
+    ref = ReferenceMap.from_points(world, 1.0, 200)
+    lines = [len(fit_planes(pole, ref, np.eye(4), PlaneRefinementConfig(
+        points=20000, vertical_lines=True, line_neighbors=n)).points) - len(pole)
+        for n in (30, 0)]
+    assert lines[1] > 0.8 * len(pole) and lines[0] > 0.9 * lines[1]
+
+
 def toothed_tube(length: float = 200.0, period: float = 0.12, depth: float = 0.04,
                  width: float = 2.6, height: float = 3.0, seed: int = 0) -> np.ndarray:
     """A corridor without end walls whose side walls are a fine sawtooth along x (teeth of

@@ -180,10 +180,11 @@ class PlaneRefinementConfig:
         line_neighbors: a line is used only if this many nearest local-map points of the
             scan point (those within ``max_neighbor_distance``, at least
             ``normal_neighbors``) form a near-vertical line too (``min_linearity``,
-            ``max_line_tilt_deg``): a sparse sensor driving towards a wall leaves vertical
-            strips of points at its columns' bearings, and the few nearest points of one
-            strip look like a pole while the wall's plane runs across it; 0 = no such
-            check. Default 30.
+            ``max_line_tilt_deg``); where they form a plane (``min_planarity``) the point
+            gets that plane instead. A sparse sensor driving towards a wall leaves vertical
+            strips of points at its columns' bearings: the few nearest points of one strip
+            look like a pole, while the wall's plane runs across it. 0 = no such check.
+            Default 30.
     """
 
     enabled: bool = True
@@ -387,8 +388,13 @@ def _planes(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConfig
     line, n1, n2 = _lines(cov[~good], w[~good], cfg)
     rows = sel[~good][line]
     if cfg.line_neighbors > k and len(rows):
-        wide = _wide_lines(reference, q[rows], cfg)
-        line, n1, n2, rows = line[wide], n1[wide], n2[wide], rows[wide]
+        wide = _wide_neighbourhoods(reference, q[rows], cfg)
+        planar = rows[wide.planar]  # strips of a surface: its plane instead
+        valid[planar] = True
+        normals[planar] = wide.normals[wide.planar]
+        centroids[planar] = wide.centroids[wide.planar]
+        tilt_var[planar] = wide.tilt_var[wide.planar]
+        line, n1, n2, rows = line[wide.line], n1[wide.line], n2[wide.line], rows[wide.line]
     valid[rows] = True
     normals[rows] = n1
     centroids[rows] = c[~good][line]
@@ -397,12 +403,28 @@ def _planes(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConfig
     return valid, normals, centroids, tilt_var, rows, n2
 
 
-def _wide_lines(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConfig
-                ) -> np.ndarray:
-    """Which of the points ``q`` (odometry frame) whose nearest neighbours form a vertical
-    line still have a near-vertical line among their ``line_neighbors`` nearest local-map
-    points within ``max_neighbor_distance`` (bool mask): a pole or a pipe stays a line as the
-    neighbourhood grows, a strip of a wall becomes the wall's plane."""
+@dataclass
+class WideNeighbourhoods:
+    """What the wider neighbourhoods of points whose nearest neighbours form a vertical line
+    are (:func:`_wide_neighbourhoods`), one row per point: ``line`` still a near-vertical
+    line (a pole, a pipe), ``planar`` a plane (a strip of a wall), with that plane's unit
+    ``normals``, ``centroids`` (odometry frame [m]) and normal tilt variances ``tilt_var``
+    [rad^2] as :func:`_planes` gives a plane fit."""
+
+    line: np.ndarray
+    planar: np.ndarray
+    normals: np.ndarray
+    centroids: np.ndarray
+    tilt_var: np.ndarray
+
+
+def _wide_neighbourhoods(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConfig
+                         ) -> WideNeighbourhoods:
+    """The ``line_neighbors`` nearest local-map points within ``max_neighbor_distance`` of
+    each of the points ``q`` (odometry frame), at least ``normal_neighbors`` of them, as a
+    near-vertical line (``min_linearity``, ``max_line_tilt_deg``) or a plane
+    (``min_planarity``): a pole stays a line as its neighbourhood grows, a strip of points on a
+    wall becomes the wall."""
     pts = reference.points
     k = min(cfg.line_neighbors, len(pts))
     dist, idx = reference.kdtree.query(q, k=k, distance_upper_bound=cfg.max_neighbor_distance)
@@ -414,11 +436,14 @@ def _wide_lines(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConf
     c = np.einsum("mk,mkj->mj", weight, nb)
     d = (nb - c[:, None, :]) * np.sqrt(weight)[..., None]
     cov = np.einsum("mki,mkj->mij", d, d)
-    w, _ = symmetric_eigen3(cov)
-    line, _, _ = _lines(cov, w, cfg)
-    keep = np.zeros(len(q), dtype=bool)
-    keep[line] = True
-    return keep & (count >= cfg.normal_neighbors)
+    w, normal = symmetric_eigen3(cov)
+    enough = count >= cfg.normal_neighbors
+    line = np.zeros(len(q), dtype=bool)
+    line[_lines(cov, w, cfg)[0]] = True
+    planar = ((w[:, 1] - w[:, 0]) / np.maximum(w[:, 2], 1e-12) >= cfg.min_planarity) & enough
+    tilt_var = np.maximum(w[:, 0], 0.0) / (np.maximum(count, 1) * np.maximum(w[:, 1], 1e-12))
+    return WideNeighbourhoods(line=line & enough & ~planar, planar=planar, normals=normal,
+                              centroids=c, tilt_var=tilt_var)
 
 
 def _lines(cov: np.ndarray, w: np.ndarray, cfg: PlaneRefinementConfig
