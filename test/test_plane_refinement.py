@@ -612,7 +612,6 @@ def test_only_near_vertical_lines_are_used(tilt_deg, used):
     assert np.allclose(np.einsum("ij,ij->i", normals[:n], normals[n:]), 0.0, atol=1e-9)
 
 
-
 def test_strips_of_a_wall_are_not_lines():
     """A sparse sensor driving towards a wall leaves vertical strips of map points at its
     columns' bearings: the nearest ten points of a strip form a vertical line, the wider
