@@ -20,7 +20,6 @@ Usage: ``python -m benchmarks.studies.line_sources [--scenario airfield] [--seed
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import tempfile
 from pathlib import Path
@@ -28,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks._common import RESULTS, machine_info, write_results
+from benchmarks._common import RESULTS, config_with, machine_info, write_results
 
 CLASSES = ("pole", "corner", "flat face", "other")
 
@@ -88,7 +87,6 @@ def classify(centroids: np.ndarray, axes: np.ndarray, boxes: list[np.ndarray],
 def measure(bag: Path, line_neighbors: int) -> dict[str, Any]:
     """One run without wheels with ``line_neighbors``; the lines' centroids (odometry frame)
     and the transform from the world to the odometry frame."""
-    from lili_odom.config import NodeConfig
     from lili_odom.evaluation.runner import run_bag
     from lili_odom.pipeline import plane_refinement
 
@@ -102,9 +100,8 @@ def measure(bag: Path, line_neighbors: int) -> dict[str, Any]:
             centroids.append(out[2][rows].copy())
         return out
 
-    config = NodeConfig()
-    config = dataclasses.replace(config, wheel_topic="/none")
-    config.pipeline.plane_refinement.line_neighbors = int(line_neighbors)
+    config = config_with({"plane_refinement.line_neighbors": int(line_neighbors)},
+                         path="benchmarks/configs/no_wheels.yaml", prog="line_sources")
     plane_refinement._planes = recording
     try:
         with tempfile.TemporaryDirectory(prefix="lili_line_sources_") as tmp:
