@@ -39,7 +39,8 @@ import numpy as np
 from benchmarks._common import RESULTS, machine_info, parse_set, write_results
 from benchmarks._pieces import format_resolution, parse_resolution, piece_bag
 
-#: default windows: a start while driving on open ground, and the whole of Trial 1
+#: default windows: starts while driving on open ground (airfield, parking lot), and the
+#: whole of Trial 1
 WINDOWS = ("airfield:30:20", "parking_lot:20:20", "tunnel_trial1:0:340")
 
 #: true steps shorter than this [m] (standing, creeping) are not compared
@@ -69,11 +70,12 @@ def recording(log: list[dict]):
         scan.update(prediction=np.array(guess, float), registration=np.array(result.pose, float))
         return result
 
-    def updated(self, t, T_icp_base, degeneracy, subspace=None, **kwargs):
+    def updated(self, t, T_icp_base, degeneracy=None, **kwargs):
+        subspace = kwargs.get("subspace")
         scan.update(measurement=None if T_icp_base is None else np.array(T_icp_base, float),
                     information=(None if subspace is None
                                  else np.array(subspace.information_scaled, float)))
-        return update(self, t, T_icp_base, degeneracy, subspace=subspace, **kwargs)
+        return update(self, t, T_icp_base, degeneracy, **kwargs)
 
     def processed(self, s):
         scan.clear()
@@ -254,12 +256,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=RESULTS)
     ap.add_argument("--name", default="travel_bias")
     args = ap.parse_args(argv)
+    from lili_odom.suite.scenario import load_scenarios
+
     try:
         resolution = parse_resolution(args.resolution)
         for w in args.windows:
-            scenario, start, duration = w.split(":")
-            if not (float(start) >= 0 and float(duration) > 0):
-                raise ValueError(f"window {w}: start must be >= 0 and duration positive")
+            parts = w.split(":")
+            if len(parts) != 3 or not (float(parts[1]) >= 0 and float(parts[2]) > 0):
+                raise ValueError(f"window {w}: expected SCENARIO:START:DURATION, start >= 0 "
+                                 "and duration positive [s]")
+        load_scenarios([w.split(":")[0] for w in args.windows], measure=False)
     except ValueError as exc:
         ap.error(str(exc))
     variants = [(v[0], parse_set(v[1:], prog="travel_bias")) for v in
@@ -277,7 +283,8 @@ def main(argv: list[str] | None = None) -> int:
         argv if argv is not None else sys.argv[1:])
     args.out.mkdir(parents=True, exist_ok=True)
     plot(report, args.out / f"{args.name}.png")
-    print(f"wrote {write_results(args.out, args.name, markdown(report, command.strip(), args.name), report)}")
+    text = markdown(report, command.strip(), args.name)
+    print(f"wrote {write_results(args.out, args.name, text, report)}")
     return 0
 
 
