@@ -153,7 +153,7 @@ def distance_gap(stamps, poses, truth_stamps, truth_poses) -> tuple[list[float],
 def run(window: str, label: str, overrides: dict[str, str], resolution: tuple[int, int],
         tmp: Path) -> dict:
     """One window with one variant: the summary, its ATE and the distance-gap curve."""
-    import lili_odom.suite.methods as methods
+    from lili_odom.bagio.tum import read_tum
     from lili_odom.suite.jobs import BagSpec, Job, execute
     from lili_odom.suite.scenario import load_scenarios
 
@@ -161,30 +161,18 @@ def run(window: str, label: str, overrides: dict[str, str], resolution: tuple[in
     (sc,) = load_scenarios([scenario], measure=False)
     bag = piece_bag(scenario, float(start), float(duration), resolution, 0, progress=False)
     log: list[dict] = []
-    runs: list = []
-    run_method = methods.run_method
-
-    def kept(job, bag_path):  # the run's estimate and truth, for the steps and the curve
-        runs.append(run_method(job, bag_path))
-        return runs[-1]
-
     out = tmp / f"{scenario}_{len(list(tmp.iterdir()))}"
     job = Job(scenario=scenario, split=sc.split, kind=sc.kind, seed=0, method="lili",
               bag=BagSpec(path=str(bag)), out_dir=str(out), truth_path=str(out / "truth.tum"),
               overrides=(("wheel_topic", "/none"),) + tuple(overrides.items()))
-    methods.run_method = kept
-    try:
-        with recording(log):
-            row = execute(job)
-    finally:
-        methods.run_method = run_method
+    with recording(log):
+        row = execute(job)
     result = {"window": window, "variant": label, "overrides": overrides,
               "ate_m": row.get("ate_m"), "error": row.get("error")}
-    if runs and not row.get("error"):
-        r = runs[0]
-        ts, tp = np.asarray(r.truth_stamps), np.asarray(r.truth_poses)
+    if not row.get("error"):  # the suite's job wrote the estimate and the truth
+        ts, tp = read_tum(job.truth_path)
+        t, gap = distance_gap(*read_tum(out / "estimate_base.tum"), ts, tp)
         result.update(summary(step_errors(log, ts, tp)))
-        t, gap = distance_gap(np.asarray(r.stamps), np.asarray(r.poses), ts, tp)
         stride = -(-len(t) // CURVE_POINTS)
         result["curve"] = (t[::stride], gap[::stride])
     return result

@@ -376,13 +376,12 @@ def _planes(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConfig
     c = np.einsum("mkj->mj", nb) / k  # the neighbourhoods' means (faster than mean(axis=1))
     cov = _covariances(nb - c[:, None, :])
     w, normal = symmetric_eigen3(cov)
-    planarity = (w[:, 1] - w[:, 0]) / np.maximum(w[:, 2], 1e-12)
-    good = planarity >= cfg.min_planarity
+    good = _planarity(w) >= cfg.min_planarity
     sel = np.flatnonzero(valid)
     valid[sel[~good]] = False
     normals[sel[good]] = normal[good]
     centroids[sel[good]] = c[good]
-    tilt_var[sel[good]] = np.maximum(w[good, 0], 0.0) / (k * np.maximum(w[good, 1], 1e-12))
+    tilt_var[sel[good]] = _tilt_variance(w[good], k)
     if not cfg.vertical_lines:
         return (valid, normals, centroids, tilt_var) + no_lines
     line, n1, n2 = _lines(cov[~good], w[~good], cfg)
@@ -440,10 +439,21 @@ def _wide_neighbourhoods(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefin
     enough = count >= cfg.normal_neighbors
     line = np.zeros(len(q), dtype=bool)
     line[_lines(cov, w, cfg)[0]] = True
-    planar = ((w[:, 1] - w[:, 0]) / np.maximum(w[:, 2], 1e-12) >= cfg.min_planarity) & enough
-    tilt_var = np.maximum(w[:, 0], 0.0) / (np.maximum(count, 1) * np.maximum(w[:, 1], 1e-12))
+    planar = (_planarity(w) >= cfg.min_planarity) & enough
     return WideNeighbourhoods(line=line & enough & ~planar, planar=planar, normals=normal,
-                              centroids=c, tilt_var=tilt_var)
+                              centroids=c, tilt_var=_tilt_variance(w, np.maximum(count, 1)))
+
+
+def _planarity(w: np.ndarray) -> np.ndarray:
+    """``(l2 - l3) / l1`` of neighbourhoods with ascending covariance eigenvalues ``w`` (m, 3)
+    (``l1 >= l2 >= l3``; dimensionless, 1 for a plane, 0 for a line or a blob)."""
+    return (w[:, 1] - w[:, 0]) / np.maximum(w[:, 2], 1e-12)
+
+
+def _tilt_variance(w: np.ndarray, count) -> np.ndarray:
+    """Variance [rad^2] of a fitted plane's normal tilt, ``l3 / (count l2)``: out-of-plane
+    scatter over the in-plane spread of ``count`` points (ascending eigenvalues ``w``)."""
+    return np.maximum(w[:, 0], 0.0) / (count * np.maximum(w[:, 1], 1e-12))
 
 
 def _lines(cov: np.ndarray, w: np.ndarray, cfg: PlaneRefinementConfig
