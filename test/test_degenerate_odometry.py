@@ -148,3 +148,7 @@ def test_vertical_lines_on_scans_long_without_wheel_data_only():
     assert not pipeline._plane_config(False).vertical_lines
     config.pipeline.plane_refinement.vertical_lines_without_wheels = False
     assert not OdometryPipeline(config.pipeline)._plane_config(True).vertical_lines
+    assert not pipeline._plane_config(True).blobs
+    config.pipeline.plane_refinement.blobs_without_wheels = True
+    blobs = OdometryPipeline(config.pipeline)
+    assert blobs._plane_config(True).blobs and not blobs._plane_config(False).blobs

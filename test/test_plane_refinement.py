@@ -1,4 +1,6 @@
 """Point-to-plane information and refinement inside a detected subspace."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
@@ -773,3 +775,79 @@ def test_without_wheels_a_direction_the_prediction_does_not_come_back_along_is_d
     pipeline.config.plane_refinement.return_check = "off"
     first, chosen = _refined_from(pipeline, toothed, 100.0, 100.0, 100.1)
     assert chosen is first and pipeline.counters["return_checks"] == 0
+
+
+def lamps(xs: np.ndarray, points: int, seed: int, half: float = 0.1) -> np.ndarray:
+    """Small lamps under a ceiling: ``points`` random points on the faces of a cube of edge
+    ``2 half`` [m] at x = each of ``xs``, y = 0, z = 2.7 (a sparse scan of a fitting: its
+    nearest map points span several faces)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for x in xs:
+        p = rng.uniform(-half, half, (points, 3))
+        p[np.arange(points), rng.integers(0, 3, points)] = rng.choice([-half, half], points)
+        out.append(p + [x, 0.0, 2.7])
+    return np.vstack(out)
+
+
+def test_blobs_bring_a_tube_with_lamps_back_along_its_axis():
+    """In a corridor without end walls whose only features are small lamps, the lamps'
+    neighbourhoods are neither planes nor lines: as blobs they hold the axis."""
+    tube = corridor(60.0, end_walls=False, step=0.1)
+    xs = np.arange(2.0, 60.0, 4.0)
+    ref = ReferenceMap.from_points(np.vstack([tube, lamps(xs, 100, seed=0)]), 1.0, 400)
+    seen = np.vstack([tube[::7], lamps(xs, 38, seed=1)]) - [30.0, 0.0, 1.5]
+    scan = seen[np.linalg.norm(seen, axis=1) < 30.0]
+    start = pose_at(30.0)
+    start[0, 3] += 0.1  # 10 cm off along the axis
+    cfg = PlaneRefinementConfig(points=40000, blobs=True, iterations=10)
+    refined = refine_in_subspace(scan, ref, start, AXIS_X, 1.0, cfg)
+    fits = fit_planes(scan, ref, start, cfg)
+    assert len(fits.points) > len(scan)  # blob rows were added
+    assert refined.ok and refined.information[0, 0] > 1000.0
+    assert abs(refined.pose[0, 3] - 30.0) < 0.02
+
+
+def test_a_blob_gets_three_rows_along_its_weighted_axes():
+    """Each point in a blob gets three residuals through its neighbourhood's centroid,
+    along the neighbourhood's principal axes, weighted by ``sigma / sqrt(l + sigma^2)``;
+    planes and lines (a sparse scan's ring, which moves with the sensor) are no blobs."""
+    from lili_odom.pipeline.plane_refinement import _blob_axes
+
+    axes = _blob_axes(np.array([np.diag([0.09, 1e-4, 0.01])]), 0.03)[0]
+    # ascending variance: y (1e-4 m^2), z (0.01), x (0.09)
+    expected = np.array([[0.0, 0.03 / np.sqrt(1e-4 + 9e-4), 0.0],
+                         [0.0, 0.0, 0.03 / np.sqrt(0.01 + 9e-4)],
+                         [0.03 / np.sqrt(0.09 + 9e-4), 0.0, 0.0]])
+    assert np.allclose(np.abs(axes), expected)
+    rng = np.random.default_rng(3)
+    blob = rng.normal([4.0, 0.0, 2.0], 0.1, (500, 3))
+    ref = ReferenceMap.from_points(blob, 1.0, 1000)
+    scan = blob[::10] - [0.0, 0.0, 1.5]
+    cfg = PlaneRefinementConfig(points=20000, blobs=True, normal_neighbors=50)
+    fits = fit_planes(scan, ref, pose_at(0.0), cfg)
+    n = len(scan)
+    m = (len(fits.points) - n) // 2  # points in a blob: two further rows each
+    assert len(fits.points) == n + 2 * m and m > 0.6 * n
+    first = np.array([np.flatnonzero((fits.points[:n] == p).all(axis=1))[0]
+                      for p in fits.points[n:n + m]])
+    assert np.array_equal(fits.points[n + m:], fits.points[n:n + m])
+    assert fits.valid[first].all()
+    assert np.allclose(fits.centroids[n:n + m], fits.centroids[first])
+    N = np.stack([fits.normals[first], fits.normals[n:n + m], fits.normals[n + m:]], axis=1)
+    gram = np.einsum("nij,nkj->nik", N, N)
+    assert np.allclose(gram - np.einsum("nii->ni", gram)[:, :, None] * np.eye(3), 0.0,
+                       atol=1e-9)  # orthogonal axes
+    assert np.all(np.linalg.norm(N, axis=2) <= 1.0)
+    # without blobs those points have no residual (the few planar neighbourhoods keep theirs)
+    planes_only = fit_planes(scan, ref, pose_at(0.0), replace(cfg, blobs=False))
+    assert len(planes_only.points) == n and not planes_only.valid[first].any()
+    assert planes_only.valid.sum() == fits.valid[:n].sum() - m
+    t = np.arange(-3.0, 3.0, 0.05)
+    ring = np.c_[np.full_like(t, 4.0), t, np.zeros_like(t)]  # a horizontal line
+    flat = np.c_[rng.uniform(-3, 3, (2000, 2)), np.zeros(2000)] + [6.0, 0.0, 0.0]
+    for cloud in (ring, flat):
+        ref = ReferenceMap.from_points(cloud, 1.0, 1000)
+        fits = fit_planes(cloud[::5] - [0, 0, 1.5], ref, pose_at(0.0),
+                          PlaneRefinementConfig(points=20000, blobs=True))
+        assert len(fits.points) == len(cloud[::5])  # no blob rows

@@ -889,11 +889,14 @@ class OdometryPipeline:
 
     def _plane_config(self, without_wheels: bool) -> PlaneRefinementConfig:
         """The plane fits' settings for a scan: with vertical lines when
-        ``vertical_lines_without_wheels`` and ``without_wheels`` (no wheel data for longer
-        than ``return_check_window_s``, or none at all: :meth:`_wheels_recent` is False)."""
+        ``vertical_lines_without_wheels`` and with blobs when ``blobs_without_wheels``, and
+        ``without_wheels`` (no wheel data for longer than ``return_check_window_s``, or none
+        at all: :meth:`_wheels_recent` is False)."""
         cfg = self.config.plane_refinement
         if without_wheels and cfg.vertical_lines_without_wheels and not cfg.vertical_lines:
-            return replace(cfg, vertical_lines=True)
+            cfg = replace(cfg, vertical_lines=True)
+        if without_wheels and cfg.blobs_without_wheels and not cfg.blobs:
+            cfg = replace(cfg, blobs=True)
         return cfg
 
     def _wheels_recent(self, t: float) -> bool:

@@ -185,6 +185,17 @@ class PlaneRefinementConfig:
             strips of points at its columns' bearings: the few nearest points of one strip
             look like a pole, while the wall's plane runs across it. 0 = no such check.
             Default 30.
+        blobs: a neighbourhood that is neither planar, nor a line of any direction
+            (``min_linearity``), but spread in every direction (``min_sphericity``) - a
+            corner, a recess's edge seen across, a lamp - holds the point by its spread:
+            three residuals through its centroid along its principal axes, each weighted by
+            ``min_point_sigma / sqrt(l_i + min_point_sigma^2)`` (``l_i`` the axis's variance
+            [m^2]; generalised ICP's point-to-distribution distance). Default False.
+        blobs_without_wheels: use such neighbourhoods (as ``blobs``) on scans with no wheel
+            data for longer than ``return_check_window_s``, or none at all (as
+            ``vertical_lines_without_wheels``). Default False.
+        min_sphericity: a neighbourhood counts for ``blobs`` when its smallest covariance
+            eigenvalue is at least this share of its largest (dimensionless); default 0.05.
     """
 
     enabled: bool = True
@@ -220,6 +231,9 @@ class PlaneRefinementConfig:
     min_linearity: float = 0.8
     max_line_tilt_deg: float = 20.0
     line_neighbors: int = 30
+    blobs: bool = False
+    blobs_without_wheels: bool = False
+    min_sphericity: float = 0.05
 
     def validate(self, prefix: str = "plane_refinement.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -257,6 +271,7 @@ class PlaneRefinementConfig:
         check_range(prefix + "min_linearity", self.min_linearity, 0.0, 1.0)
         check_range(prefix + "max_line_tilt_deg", self.max_line_tilt_deg, 0.0, 90.0, unit="deg")
         check_range(prefix + "line_neighbors", self.line_neighbors, 0, 1000)
+        check_range(prefix + "min_sphericity", self.min_sphericity, 0.0, 1.0)
         if self.return_check not in RETURN_CHECKS:
             raise ValueError(f"{prefix}return_check must be one of "
                              f"{', '.join(RETURN_CHECKS)}, got '{self.return_check}'")
@@ -351,8 +366,10 @@ def _covariances(d: np.ndarray) -> np.ndarray:
 def _planes(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConfig
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Plane fits around ``q`` (odometry frame): (valid mask, normals, centroids, normal
-    variances) per point, and the rows of ``q`` on a vertical line (``_lines``) with their
-    second normal (the first is in ``normals``).
+    variances) per point, and the rows of ``q`` that need more than one residual with their
+    further normals (the first is in ``normals``): a point on a vertical line (``_lines``)
+    once, with the line's second normal; a point in a blob (``_blobs``) twice, with the
+    second and third of its weighted principal axes (``_blob_axes``).
 
     The variance of a fitted normal's tilt [rad^2] is about ``l3 / (k l2)`` (out-of-plane
     scatter over the in-plane spread of ``k`` points, ``l1 >= l2 >= l3`` the eigenvalues of the
@@ -382,24 +399,64 @@ def _planes(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConfig
     normals[sel[good]] = normal[good]
     centroids[sel[good]] = c[good]
     tilt_var[sel[good]] = _tilt_variance(w[good], k)
-    if not cfg.vertical_lines:
+    if not (cfg.vertical_lines or cfg.blobs):
         return (valid, normals, centroids, tilt_var) + no_lines
-    line, n1, n2 = _lines(cov[~good], w[~good], cfg)
-    rows = sel[~good][line]
-    if cfg.line_neighbors > k and len(rows):
-        wide = _wide_neighbourhoods(reference, q[rows], cfg)
-        planar = rows[wide.planar]  # strips of a surface: its plane instead
-        valid[planar] = True
-        normals[planar] = wide.normals[wide.planar]
-        centroids[planar] = wide.centroids[wide.planar]
-        tilt_var[planar] = wide.tilt_var[wide.planar]
-        line, n1, n2, rows = line[wide.line], n1[wide.line], n2[wide.line], rows[wide.line]
-    valid[rows] = True
-    normals[rows] = n1
-    centroids[rows] = c[~good][line]
-    wl = w[~good][line]
-    tilt_var[rows] = np.maximum(wl[:, 1], 0.0) / (k * np.maximum(wl[:, 2], 1e-12))
-    return valid, normals, centroids, tilt_var, rows, n2
+    rest, cov_rest, w_rest, c_rest = sel[~good], cov[~good], w[~good], c[~good]
+    extra_rows, extra_normals = [no_lines[0]], [no_lines[1]]
+    candidate = np.zeros(len(rest), dtype=bool)
+    if cfg.vertical_lines:
+        line, n1, n2 = _lines(cov_rest, w_rest, cfg)
+        candidate[line] = True
+        rows = rest[line]
+        if cfg.line_neighbors > k and len(rows):
+            wide = _wide_neighbourhoods(reference, q[rows], cfg)
+            planar = rows[wide.planar]  # strips of a surface: its plane instead
+            valid[planar] = True
+            normals[planar] = wide.normals[wide.planar]
+            centroids[planar] = wide.centroids[wide.planar]
+            tilt_var[planar] = wide.tilt_var[wide.planar]
+            line, n1, n2, rows = line[wide.line], n1[wide.line], n2[wide.line], rows[wide.line]
+        valid[rows] = True
+        normals[rows] = n1
+        centroids[rows] = c_rest[line]
+        wl = w_rest[line]
+        tilt_var[rows] = np.maximum(wl[:, 1], 0.0) / (k * np.maximum(wl[:, 2], 1e-12))
+        extra_rows.append(rows)
+        extra_normals.append(n2)
+    if cfg.blobs:
+        blob = np.flatnonzero(~candidate & _blobs(w_rest, cfg))
+        rows, axes = rest[blob], _blob_axes(cov_rest[blob], cfg.min_point_sigma)
+        valid[rows] = True
+        normals[rows] = axes[:, 0]
+        centroids[rows] = c_rest[blob]
+        tilt_var[rows] = 0.0
+        extra_rows += [rows, rows]
+        extra_normals += [axes[:, 1], axes[:, 2]]
+    return (valid, normals, centroids, tilt_var, np.concatenate(extra_rows),
+            np.vstack(extra_normals))
+
+
+def _blobs(w: np.ndarray, cfg: PlaneRefinementConfig) -> np.ndarray:
+    """Which neighbourhoods (ascending covariance eigenvalues ``w`` (m, 3)) are neither a
+    plane (``min_planarity``) nor a line of any direction (``min_linearity``) and spread in
+    every direction (smallest eigenvalue at least ``min_sphericity`` of the largest): a
+    corner, the edge of a recess seen across, a lamp, a bracket."""
+    top = np.maximum(w[:, 2], 1e-12)
+    return ((_planarity(w) < cfg.min_planarity) & ((w[:, 2] - w[:, 1]) / top < cfg.min_linearity)
+            & (w[:, 0] >= cfg.min_sphericity * top))
+
+
+def _blob_axes(cov: np.ndarray, sigma: float) -> np.ndarray:
+    """(m, 3, 3) weighted principal axes of neighbourhoods with covariances ``cov`` (m, 3, 3):
+    ``[:, i]`` is the i-th unit eigenvector (ascending eigenvalue ``l_i``) times
+    ``sigma / sqrt(l_i + sigma^2)``, so the three point-to-plane residuals on these "normals"
+    through the centroid make up the point-to-distribution distance of generalised ICP,
+    in units of a plane residual of 1-sigma ``sigma`` [m]."""
+    if not len(cov):
+        return np.zeros((0, 3, 3))
+    lam, vec = np.linalg.eigh(cov)
+    scale = sigma / np.sqrt(np.maximum(lam, 0.0) + sigma**2)  # (m, 3)
+    return np.transpose(vec, (0, 2, 1)) * scale[:, :, None]
 
 
 @dataclass
@@ -487,9 +544,11 @@ class PlaneFits:
     Attributes:
         pose: 4x4 ``T_odom_lidar`` at which the points were associated.
         points: (N, 3) the scan points used (thinned to ``points``; a point on a vertical
-            line once more at the end, for the line's second plane), LiDAR frame [m].
+            line once more at the end, for the line's second plane, a point in a blob twice
+            more, for its second and third axes), LiDAR frame [m].
         valid: (N,) a plane was fitted for the point.
-        normals, centroids: (N, 3) plane normals and centroids, odometry frame [m].
+        normals, centroids: (N, 3) plane normals and centroids, odometry frame [m]; a blob's
+            rows have weighted axes (``_blob_axes``, norm at most 1) as normals.
         tilt_var: (N,) variance of the fitted normal's tilt [rad^2].
     """
 
@@ -516,7 +575,8 @@ def fit_planes(points: np.ndarray, reference: ReferenceMap, pose: np.ndarray,
     """Thin the scan to ``config.points``, place it at ``pose`` and fit a local-map plane to
     each point's ``normal_neighbors`` nearest map points (one k-d tree query); a point whose
     neighbours form a vertical line (``config.vertical_lines``) gets the line's two planes,
-    the second as an extra row."""
+    the second as an extra row; a point in a blob (``config.blobs``) three rows, the second
+    and third as extra rows."""
     cfg = config or PlaneRefinementConfig()
     pose = geometry.orthonormalize(np.asarray(pose, dtype=float))
     pts = geometry.drop_nonfinite_rows(np.asarray(points, dtype=float).reshape(-1, 3))
@@ -527,7 +587,7 @@ def fit_planes(points: np.ndarray, reference: ReferenceMap, pose: np.ndarray,
                          np.zeros(len(pts)))
     q = pts @ pose[:3, :3].T + pose[:3, 3]
     valid, normals, centroids, tilt_var, line, n2 = _planes(reference, q, cfg)
-    if len(line):  # a point on a line: a second row with the line's second plane
+    if len(line):  # further rows: a line's second plane, a blob's second and third axes
         pts = np.vstack([pts, pts[line]])
         valid = np.concatenate([valid, np.ones(len(line), bool)])
         normals = np.vstack([normals, n2])
