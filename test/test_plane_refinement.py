@@ -824,7 +824,7 @@ def test_a_blob_gets_three_rows_along_its_weighted_axes():
     blob = rng.normal([4.0, 0.0, 2.0], 0.1, (500, 3))
     ref = ReferenceMap.from_points(blob, 1.0, 1000)
     scan = blob[::10] - [0.0, 0.0, 1.5]
-    cfg = PlaneRefinementConfig(points=20000, blobs=True, normal_neighbors=50)
+    cfg = PlaneRefinementConfig(points=20000, blobs=True, normal_neighbors=50, max_blob_spread=1.0)
     fits = fit_planes(scan, ref, pose_at(0.0), cfg)
     n = len(scan)
     m = (len(fits.points) - n) // 2  # points in a blob: two further rows each

@@ -196,6 +196,12 @@ class PlaneRefinementConfig:
             ``vertical_lines_without_wheels``). Default False.
         min_sphericity: a neighbourhood counts for ``blobs`` when its smallest covariance
             eigenvalue is at least this share of its largest (dimensionless); default 0.05.
+        max_blob_spread: a blob's axis is used only where the neighbourhood's variance along
+            it is at most this share of the squared distance to its farthest neighbour
+            (dimensionless): along an axis where the neighbours reach as far as the search did
+            (about 0.2-0.33 of that square for a cut-off ball, disc or segment), the search
+            cut the structure off and the centroid follows the point. Default 0.1; 1 = every
+            axis.
     """
 
     enabled: bool = True
@@ -234,6 +240,7 @@ class PlaneRefinementConfig:
     blobs: bool = False
     blobs_without_wheels: bool = False
     min_sphericity: float = 0.05
+    max_blob_spread: float = 0.1
 
     def validate(self, prefix: str = "plane_refinement.") -> None:
         """Raise ``ValueError("<prefix><name> must be <range>, got <value>")``."""
@@ -272,6 +279,7 @@ class PlaneRefinementConfig:
         check_range(prefix + "max_line_tilt_deg", self.max_line_tilt_deg, 0.0, 90.0, unit="deg")
         check_range(prefix + "line_neighbors", self.line_neighbors, 0, 1000)
         check_range(prefix + "min_sphericity", self.min_sphericity, 0.0, 1.0)
+        check_range(prefix + "max_blob_spread", self.max_blob_spread, 0.0, 1.0)
         if self.return_check not in RETURN_CHECKS:
             raise ValueError(f"{prefix}return_check must be one of "
                              f"{', '.join(RETURN_CHECKS)}, got '{self.return_check}'")
@@ -368,8 +376,9 @@ def _planes(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConfig
     """Plane fits around ``q`` (odometry frame): (valid mask, normals, centroids, normal
     variances) per point, and the rows of ``q`` that need more than one residual with their
     further normals (the first is in ``normals``): a point on a vertical line (``_lines``)
-    once, with the line's second normal; a point in a blob (``_blobs``) twice, with the
-    second and third of its weighted principal axes (``_blob_axes``).
+    once, with the line's second normal; a point in a blob (``_blobs``) up to twice, with the
+    second and third of its weighted principal axes (``_blob_axes``) where the search did
+    not cut the neighbourhood off along them (``max_blob_spread``).
 
     The variance of a fitted normal's tilt [rad^2] is about ``l3 / (k l2)`` (out-of-plane
     scatter over the in-plane spread of ``k`` points, ``l1 >= l2 >= l3`` the eigenvalues of the
@@ -426,12 +435,19 @@ def _planes(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConfig
     if cfg.blobs:
         blob = np.flatnonzero(~candidate & _blobs(w_rest, cfg))
         rows, axes = rest[blob], _blob_axes(cov_rest[blob], cfg.min_point_sigma)
+        # an axis along which the neighbours spread as far as the search reached is cut off
+        # by the search: its centroid follows the point and says nothing about the pose
+        reach = dist[rest[blob], -1] ** 2  # dist rows are q's rows
+        closed = np.sort(w_rest[blob], axis=1) <= cfg.max_blob_spread * reach[:, None]
+        first = closed[:, 0]  # ascending: no axis is closed when the smallest is not
+        rows, axes, closed, cb = rows[first], axes[first], closed[first], c_rest[blob][first]
         valid[rows] = True
         normals[rows] = axes[:, 0]
-        centroids[rows] = c_rest[blob]
+        centroids[rows] = cb
         tilt_var[rows] = 0.0
-        extra_rows += [rows, rows]
-        extra_normals += [axes[:, 1], axes[:, 2]]
+        for i in (1, 2):
+            extra_rows.append(rows[closed[:, i]])
+            extra_normals.append(axes[closed[:, i], i])
     return (valid, normals, centroids, tilt_var, np.concatenate(extra_rows),
             np.vstack(extra_normals))
 
@@ -544,8 +560,8 @@ class PlaneFits:
     Attributes:
         pose: 4x4 ``T_odom_lidar`` at which the points were associated.
         points: (N, 3) the scan points used (thinned to ``points``; a point on a vertical
-            line once more at the end, for the line's second plane, a point in a blob twice
-            more, for its second and third axes), LiDAR frame [m].
+            line once more at the end, for the line's second plane, a point in a blob up to
+            twice more, for its second and third axes), LiDAR frame [m].
         valid: (N,) a plane was fitted for the point.
         normals, centroids: (N, 3) plane normals and centroids, odometry frame [m]; a blob's
             rows have weighted axes (``_blob_axes``, norm at most 1) as normals.
@@ -575,8 +591,8 @@ def fit_planes(points: np.ndarray, reference: ReferenceMap, pose: np.ndarray,
     """Thin the scan to ``config.points``, place it at ``pose`` and fit a local-map plane to
     each point's ``normal_neighbors`` nearest map points (one k-d tree query); a point whose
     neighbours form a vertical line (``config.vertical_lines``) gets the line's two planes,
-    the second as an extra row; a point in a blob (``config.blobs``) three rows, the second
-    and third as extra rows."""
+    the second as an extra row; a point in a blob (``config.blobs``) up to three rows, the
+    second and third as extra rows."""
     cfg = config or PlaneRefinementConfig()
     pose = geometry.orthonormalize(np.asarray(pose, dtype=float))
     pts = geometry.drop_nonfinite_rows(np.asarray(points, dtype=float).reshape(-1, 3))
