@@ -851,3 +851,28 @@ def test_a_blob_gets_three_rows_along_its_weighted_axes():
         fits = fit_planes(cloud[::5] - [0, 0, 1.5], ref, pose_at(0.0),
                           PlaneRefinementConfig(points=20000, blobs=True))
         assert len(fits.points) == len(cloud[::5])  # no blob rows
+
+
+def test_blob_axes_the_search_cut_off_hold_the_pose_where_it_was_put():
+    """Lamps that are clusters of points with no surface: along an axis where a blob's ten
+    nearest map points are cut off by the search, their centroid follows the point, so with
+    every axis (``max_blob_spread`` 1) the refinement stays near where it started, claiming
+    information; with only the closed axes (the default) it comes back as planes alone do."""
+    rng = np.random.default_rng(0)
+    tube = corridor(60.0, end_walls=False, step=0.1)
+    xs = np.arange(2.0, 60.0, 4.0)
+    ref = ReferenceMap.from_points(
+        np.vstack([tube] + [rng.normal([x, 0.0, 2.7], 0.1, (30, 3)) for x in xs]), 1.0, 400)
+    seen = np.vstack([tube[::7]] + [rng.normal([x, 0.0, 2.7], 0.1, (15, 3)) for x in xs])
+    scan = seen - [30.0, 0.0, 1.5]
+    scan = scan[np.linalg.norm(scan, axis=1) < 30.0]
+    start = pose_at(30.0)
+    start[0, 3] += 0.1  # 10 cm off along the axis
+
+    def left(**kw) -> float:
+        cfg = PlaneRefinementConfig(points=40000, iterations=10, **kw)
+        return abs(refine_in_subspace(scan, ref, start, AXIS_X, 1.0, cfg).pose[0, 3] - 30.0)
+
+    planes = left()
+    assert left(blobs=True, max_blob_spread=1.0) > 0.05 > planes
+    assert left(blobs=True) < planes + 0.01
