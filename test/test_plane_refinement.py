@@ -814,7 +814,9 @@ def test_a_blob_gets_three_rows_along_its_weighted_axes():
     planes and lines (a sparse scan's ring, which moves with the sensor) are no blobs."""
     from lili_odom.pipeline.plane_refinement import _blob_axes
 
-    axes = _blob_axes(np.array([np.diag([0.09, 1e-4, 0.01])]), 0.03)[0]
+    lam, axes = _blob_axes(np.array([np.diag([0.09, 1e-4, 0.01])]), 0.03)
+    assert np.allclose(lam, [[1e-4, 0.01, 0.09]])
+    axes = axes[0]
     # ascending variance: y (1e-4 m^2), z (0.01), x (0.09)
     expected = np.array([[0.0, 0.03 / np.sqrt(1e-4 + 9e-4), 0.0],
                          [0.0, 0.0, 0.03 / np.sqrt(0.01 + 9e-4)],

@@ -73,6 +73,8 @@ def accel_bias(scans_csv: Path) -> tuple[list[float], list[float]]:
     last scan (``scans.csv``)."""
     with open(scans_csv) as f:
         rows = list(csv.DictReader(f))
+    if not rows:
+        return [float("nan")] * 3, [float("nan")] * 3
     t0 = float(rows[0]["stamp"])
     first = next((r for r in rows if float(r["stamp"]) - t0 >= 5.0), rows[-1])
     pick = lambda r: [float(r[f"accel_bias_{a}"]) for a in "xyz"]  # noqa: E731
@@ -177,7 +179,8 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         load_scenarios([args.scenario], measure=False)
-        variants = [(v[0], parse_set(v[1:])) for v in (args.variant or [["defaults"]])]
+        variants = [(v[0], parse_set(v[1:], prog="height_drift"))
+                    for v in (args.variant or [["defaults"]])]
     except (KeyError, ValueError) as e:
         print(f"height_drift: {e}", file=sys.stderr)
         return 2

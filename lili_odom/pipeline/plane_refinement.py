@@ -187,8 +187,9 @@ class PlaneRefinementConfig:
             Default 30.
         blobs: a neighbourhood that is neither planar, nor a line of any direction
             (``min_linearity``), but spread in every direction (``min_sphericity``) - a
-            corner, a recess's edge seen across, a lamp - holds the point by its spread:
-            three residuals through its centroid along its principal axes, each weighted by
+            corner, a recess's edge seen across, a lamp - holds the point by its spread: up
+            to three residuals through its centroid along its principal axes (those
+            ``max_blob_spread`` keeps), each weighted by
             ``min_point_sigma / sqrt(l_i + min_point_sigma^2)`` (``l_i`` the axis's variance
             [m^2]; generalised ICP's point-to-distribution distance). Default False.
         blobs_without_wheels: use such neighbourhoods (as ``blobs``) on scans with no wheel
@@ -434,12 +435,13 @@ def _planes(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConfig
         extra_normals.append(n2)
     if cfg.blobs:
         blob = np.flatnonzero(~candidate & _blobs(w_rest, cfg))
-        rows, axes = rest[blob], _blob_axes(cov_rest[blob], cfg.min_point_sigma)
+        lam, axes = _blob_axes(cov_rest[blob], cfg.min_point_sigma)
         # an axis along which the neighbours spread as far as the search reached is cut off
         # by the search: its centroid follows the point and says nothing about the pose
         reach = dist[rest[blob], -1] ** 2  # dist rows are q's rows
-        closed = np.sort(w_rest[blob], axis=1) <= cfg.max_blob_spread * reach[:, None]
+        closed = lam <= cfg.max_blob_spread * reach[:, None]
         first = closed[:, 0]  # ascending: no axis is closed when the smallest is not
+        rows = rest[blob]
         rows, axes, closed, cb = rows[first], axes[first], closed[first], c_rest[blob][first]
         valid[rows] = True
         normals[rows] = axes[:, 0]
@@ -462,17 +464,17 @@ def _blobs(w: np.ndarray, cfg: PlaneRefinementConfig) -> np.ndarray:
             & (w[:, 0] >= cfg.min_sphericity * top))
 
 
-def _blob_axes(cov: np.ndarray, sigma: float) -> np.ndarray:
-    """(m, 3, 3) weighted principal axes of neighbourhoods with covariances ``cov`` (m, 3, 3):
-    ``[:, i]`` is the i-th unit eigenvector (ascending eigenvalue ``l_i``) times
-    ``sigma / sqrt(l_i + sigma^2)``, so the three point-to-plane residuals on these "normals"
-    through the centroid make up the point-to-distribution distance of generalised ICP,
-    in units of a plane residual of 1-sigma ``sigma`` [m]."""
+def _blob_axes(cov: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """Ascending variances ``l`` (m, 3) [m^2] and weighted principal axes (m, 3, 3) of
+    neighbourhoods with covariances ``cov`` (m, 3, 3): ``[:, i]`` is the unit eigenvector of
+    ``l_i`` times ``sigma / sqrt(l_i + sigma^2)``, so the three point-to-plane residuals on
+    these "normals" through the centroid make up the point-to-distribution distance of
+    generalised ICP, in units of a plane residual of 1-sigma ``sigma`` [m]."""
     if not len(cov):
-        return np.zeros((0, 3, 3))
+        return np.zeros((0, 3)), np.zeros((0, 3, 3))
     lam, vec = np.linalg.eigh(cov)
     scale = sigma / np.sqrt(np.maximum(lam, 0.0) + sigma**2)  # (m, 3)
-    return np.transpose(vec, (0, 2, 1)) * scale[:, :, None]
+    return lam, np.transpose(vec, (0, 2, 1)) * scale[:, :, None]
 
 
 @dataclass
