@@ -27,9 +27,17 @@ def test_largest_jump_finds_the_biggest_change_within_the_window():
     assert abs(change - 0.3) < 0.01 and 12.0 <= when <= 15.0
 
 
-def test_the_true_bias_is_the_simulators_draw():
+def test_the_true_bias_is_the_simulators_draw(monkeypatch):
+    """The study's bias is the one :func:`simulate_imu` starts its accelerometer with (its
+    first sample adds one step of the random walk, about 1e-5 m/s^2)."""
+    from types import SimpleNamespace
+
+    import lili_odom.sim.imu as sim_imu
     from lili_odom.sim.sensors import ImuConfig
 
-    b = np.array(true_accel_bias(21))
-    assert b.shape == (3,) and np.all(np.abs(b) < 5 * ImuConfig().accel_bias_sigma0)
-    assert true_accel_bias(21) == true_accel_bias(21) != true_accel_bias(1)
+    monkeypatch.setattr(sim_imu, "true_imu",
+                        lambda traj, t, X, g: (np.zeros((len(t), 3)), np.zeros((len(t), 3))))
+    for seed in (1, 21):
+        imu = sim_imu.simulate_imu(SimpleNamespace(duration=0.05), np.eye(4), ImuConfig(), seed)
+        assert np.allclose(imu.accel_bias[0], true_accel_bias(seed), atol=1e-4)
+    assert not np.allclose(true_accel_bias(1), true_accel_bias(21), atol=1e-3)
