@@ -512,13 +512,14 @@ def test_accelerometer_bias_recovered_while_driving_a_degenerate_axis(factor: st
     assert abs(out.pose[0, 3] - 20.0) < 0.05 and abs(out.pose[1, 3]) < 0.01
 
 
-def _turn_under_a_tilted_map(gain: float, delta: float = 0.01, n: int = 300) -> tuple:
+def _turn_under_a_tilted_map(gain: float, delta: float = 0.01, n: int = 300,
+                             **overrides) -> tuple:
     """Level robot turning in place at 0.3 rad/s, IMU exact; the registrations come from a map
     whose frame is tilted by ``delta`` [rad] about x (what an accelerometer bias taken for
     gravity at the start leaves). Returns (last output, mean |registration - fused| tilt of
     the last 50 updates [rad])."""
     wz = 0.3
-    cfg = config(gravity_align=False, gravity_tracking_gain=gain)
+    cfg = config(gravity_align=False, gravity_tracking_gain=gain, **overrides)
     est = FusionEstimator(cfg)
     tilt = exp(np.array([0, 0, 0, delta, 0, 0]))
     feed_imu(est, -1.0, 0.0, (0.0, 0.0, G), (0.0, 0.0, wz))
@@ -543,6 +544,37 @@ def test_gravity_tracking_follows_the_map_frame_through_a_turn() -> None:
     assert diff0 > 0.002, diff0
     assert diff1 < 0.5 * diff0, (diff1, diff0)
     np.testing.assert_allclose(out1.gravity_tilt, [0.01, 0.0], atol=0.003)
+
+
+def test_gravity_variable_takes_the_map_frames_tilt_with_the_bias() -> None:
+    """As a graph variable, the tilt between the map's frame and gravity is estimated with
+    the accelerometer bias: at rest the two share the reading, the turn tells them apart,
+    and the estimate agrees with the tilted map without a gain."""
+    _, diff0 = _turn_under_a_tilted_map(0.0)
+    out, diff = _turn_under_a_tilted_map(0.0, gravity_variable=True)
+    assert diff < 0.25 * diff0, (diff, diff0)
+    np.testing.assert_allclose(out.gravity_tilt, [0.01, 0.0], atol=0.002)
+    np.testing.assert_allclose(out.accel_bias, 0.0, atol=0.2 * G * 0.01)
+
+
+def test_gravity_variable_survives_graph_resets_and_recovery() -> None:
+    """The frame variable is carried through the periodic reset (joint marginal with the
+    newest state) and through a rebuild after a solver failure."""
+    out, diff = _turn_under_a_tilted_map(0.0, n=120, gravity_variable=True, reset_every=7)
+    assert diff < 0.002, diff
+    np.testing.assert_allclose(out.gravity_tilt, [0.01, 0.0], atol=0.003)
+    est = FusionEstimator(config(gravity_align=False, gravity_variable=True))
+    feed_imu(est, -1.0, 0.0, (0.0, 0.0, G))
+    est.initialize(0.0, pose=np.eye(4), velocity=np.zeros(3))
+    est.gravity_tilt = np.array([0.004, -0.002])  # the next initialize's prior mean
+    np.testing.assert_allclose(est.initialize(0.0, pose=np.eye(4)).gravity_tilt,
+                               [0.004, -0.002], atol=1e-9)
+    prev = est._state
+    est._recover(prev)
+    feed_imu(est, 0.01, 0.1, (0.0, 0.0, G))
+    out = est.update(0.1, np.eye(4))
+    assert out is not None
+    np.testing.assert_allclose(out.gravity_tilt, [0.004, -0.002], atol=1e-4)
 
 
 def test_gravity_tracking_is_bounded_and_gated() -> None:

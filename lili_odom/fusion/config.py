@@ -179,6 +179,15 @@ class FusionConfig:
         gravity_tracking_max: bound of that rotation of gravity [rad].
         gravity_tracking_gate: registrations whose tilt differs from the fused pose's by more
             than this [rad] are not used for it (outliers).
+        gravity_variable: estimate the tilt of the odometry frame against gravity as a
+            variable of the graph, jointly with the accelerometer bias, instead of tracking
+            it with a gain (the ``gravity_tracking_*`` parameters are then unused). The
+            odometry frame (the local map's) stays the start's gravity-aligned frame; the
+            IMU factors act in a gravity frame tilted from it by the variable, and the
+            LiDAR's absolute factors tie the two. Default off.
+        gravity_variable_sigma: prior standard deviation of that tilt about x and y [rad]
+            (an accelerometer bias ``b`` taken for gravity at the start tilts the frame by
+            about ``b / g``; default 0.01, about ``imu.accel_bias_prior_sigma / g``).
         wheel_scale: online calibration of the wheel distance scale
             (:mod:`lili_odom.fusion.wheel_scale`).
         wheel_weak_scale: factor on the wheel information outside the degenerate subspace
@@ -230,6 +239,8 @@ class FusionConfig:
     gravity_tracking_deadband: float = 0.0
     gravity_tracking_max: float = 0.035
     gravity_tracking_gate: float = 0.05
+    gravity_variable: bool = False
+    gravity_variable_sigma: float = 0.01
     wheel_weak_scale: float = 0.0
     wheel_restriction: str = "weighted"
     no_imu_sigma_translation_per_s: float = 1.0
@@ -271,6 +282,8 @@ class FusionConfig:
         check_range(prefix + "gravity_tracking_max", self.gravity_tracking_max, 0.0, 0.5,
                     unit="rad")
         check_range(prefix + "gravity_tracking_gate", self.gravity_tracking_gate, 0.0, 0.5,
+                    lo_open=True, unit="rad")
+        check_range(prefix + "gravity_variable_sigma", self.gravity_variable_sigma, 0.0, 0.5,
                     lo_open=True, unit="rad")
         check_range(prefix + "wheel_weak_scale", self.wheel_weak_scale, 0.0, 1.0)
         if self.wheel_restriction not in WHEEL_RESTRICTIONS:

@@ -5,8 +5,12 @@ States (one per LiDAR scan, at the scan's ``header.stamp``):
 * ``X(i)``: ``gtsam.Pose3`` of ``base_link`` in the odometry frame (gravity-aligned at the
   start, z up; with ``gravity_tracking_gain`` the IMU factors' gravity may later tilt by up to
   ``gravity_tracking_max`` in it, to keep the frame of the local map, see
-  :meth:`FusionEstimator._track_gravity`).
-* ``V(i)``: velocity of ``base_link`` in the odometry frame [m/s].
+  :meth:`FusionEstimator._track_gravity`). With ``gravity_variable``, ``X(i)`` is in the
+  gravity frame instead, and one more variable ``FRAME`` (``Pose3``) is the odometry frame's
+  pose in it: its tilt about x and y is estimated with the accelerometer bias (a prior of
+  ``gravity_variable_sigma``), its yaw and translation are held at zero; the estimator's
+  outputs are in the odometry frame (``FRAME^-1 X(i)``).
+* ``V(i)``: velocity of ``base_link`` in the odometry (resp. gravity) frame [m/s].
 * ``B(i)``: ``imuBias.ConstantBias`` (accelerometer [m/s^2], gyro [rad/s]) in the IMU frame.
 
 Factors between consecutive states ``i-1 -> i``:
@@ -84,7 +88,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Iterable
 
 import gtsam
@@ -93,6 +97,7 @@ from gtsam.symbol_shorthand import B, V, X
 
 from lili_odom.fusion.config import FusionConfig
 from lili_odom.fusion.factors import (
+    absolute_factor,
     add_lidar_factors,
     add_motion_model_factors,
     add_subspace_factor,
@@ -130,7 +135,13 @@ from lili_odom.fusion.wheel import WheelBuffer
 from lili_odom.fusion.wheel_scale import WheelScaleEstimator
 from lili_odom.geometry import exp, log, matrix, orthonormalize
 
-__all__ = ["FusionEstimator", "FusionOutput", "FusionStats", "SubspaceMeasurement"]
+__all__ = ["FRAME", "FusionEstimator", "FusionOutput", "FusionStats", "SubspaceMeasurement"]
+
+#: Key of the odometry frame's pose in the gravity frame (``FusionConfig.gravity_variable``).
+FRAME = gtsam.symbol("g", 0)
+
+#: Prior sigma [rad, m] of the frame variable's yaw and translation (a gauge: held at zero).
+FRAME_GAUGE_SIGMA = 1e-6
 
 @dataclass
 class FusionOutput:
@@ -203,6 +214,27 @@ class FusionStats:
     last_failure: str = ""
 
 
+def _joint_prior(joint: gtsam.JointMarginal, keys: list[int]) -> gtsam.JacobianFactor:
+    """One linear factor over ``keys`` holding their joint marginal information (GTSAM's
+    wrapped ``JacobianFactor`` takes at most three keys: the information is summed from
+    one- and two-key ``HessianFactor`` pieces and the sum turned into a ``JacobianFactor``)."""
+    pieces = gtsam.GaussianFactorGraph()
+    for a, ka in enumerate(keys):
+        block = np.asarray(joint.at(ka, ka), dtype=float)
+        if not finite(block):
+            raise ValueError("bad joint marginal")
+        d = block.shape[0]
+        pieces.add(gtsam.HessianFactor(ka, 0.5 * (block + block.T), np.zeros(d), 0.0))
+        for kb in keys[a + 1:]:
+            cross = np.asarray(joint.at(ka, kb), dtype=float)
+            if not finite(cross):
+                raise ValueError("bad joint marginal")
+            m, n = cross.shape
+            pieces.add(gtsam.HessianFactor(ka, kb, np.zeros((m, m)), cross, np.zeros(m),
+                                           np.zeros((n, n)), np.zeros(n), 0.0))
+    return gtsam.JacobianFactor(gtsam.HessianFactor(pieces))
+
+
 @dataclass
 class _FactorPlan:
     """How one update's information is shared out (:meth:`FusionEstimator._plan_factors`).
@@ -226,10 +258,21 @@ class _FactorPlan:
 class _State:
     t: float
     index: int
-    pose: gtsam.Pose3
-    velocity: np.ndarray
+    pose: gtsam.Pose3  # odometry frame
+    velocity: np.ndarray  # odometry frame
     bias: gtsam.imuBias.ConstantBias
     cov_gtsam: np.ndarray  # 6x6 pose marginal, GTSAM order
+    frame: gtsam.Pose3 = field(default_factory=gtsam.Pose3)  # odometry frame in the graph's
+
+    @property
+    def graph_pose(self) -> gtsam.Pose3:
+        """``X(i)`` as the graph holds it (the gravity frame with ``gravity_variable``)."""
+        return self.frame.compose(self.pose)
+
+    @property
+    def graph_velocity(self) -> np.ndarray:
+        """``V(i)`` as the graph holds it."""
+        return self.frame.rotation().matrix() @ self.velocity
 
 
 class FusionEstimator:
@@ -257,6 +300,7 @@ class FusionEstimator:
         self.stats = FusionStats()
         self._gravity_tilt = np.zeros(2)  # gravity_tracking_gain: rad about odom x, y
         self._tilt_difference = np.zeros(2)  # averaged registration - fused tilt [rad]
+        self._frame0 = gtsam.Pose3()  # gravity_variable: prior mean of FRAME at initialize
         self._params = make_preintegration_params(cfg.imu, self.T_base_imu)
         self._lever_arm = (lever_arm_in_imu(self.T_base_imu)
                            if cfg.imu.compensate_angular_acceleration else None)
@@ -369,14 +413,20 @@ class FusionEstimator:
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         pose_sigmas = np.array([cfg.prior_sigma_rotation] * 3 + [cfg.prior_sigma_translation] * 3)
-        graph.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(T0),
-                                         gtsam.noiseModel.Diagonal.Sigmas(pose_sigmas)))
+        frame, frame_key = gtsam.Pose3(), None
+        if cfg.gravity_variable:
+            frame, frame_key = self._frame0, FRAME
+            graph.add(gtsam.PriorFactorPose3(FRAME, frame, self._frame_noise()))
+            values.insert(FRAME, frame)
+        graph.add(absolute_factor(X(0), T0, gtsam.noiseModel.Diagonal.Sigmas(pose_sigmas),
+                                  frame_key))
+        v0 = frame.rotation().matrix() @ v0
         graph.add(gtsam.PriorFactorVector(V(0), v0, gtsam.noiseModel.Isotropic.Sigma(3, sigma_v)))
         bias_sigmas = np.array([cfg.imu.accel_bias_prior_sigma] * 3
                                + [cfg.imu.gyro_bias_prior_sigma] * 3)
         graph.add(gtsam.PriorFactorConstantBias(B(0), bias0,
                                                 gtsam.noiseModel.Diagonal.Sigmas(bias_sigmas)))
-        values.insert(X(0), gtsam.Pose3(T0))
+        values.insert(X(0), frame.compose(gtsam.Pose3(T0)))
         values.insert(V(0), v0)
         values.insert(B(0), bias0)
         self._isam = self._new_isam()
@@ -555,9 +605,11 @@ class FusionEstimator:
                 if used_imu and self._kernel_holdoff > 0:
                     kernel = None
                 add_lidar_factors(graph, i, cfg.lidar.factor, T_prev, lidar.pose,
-                                  plan.lidar_target, plan.lidar_information, kernel)
+                                  plan.lidar_target, plan.lidar_information, kernel,
+                                  self._frame_key)
             if used_lidar and plan.sub_info is not None:
-                add_subspace_factor(graph, i, plan.sub_pose, plan.sub_info, kernel)
+                add_subspace_factor(graph, i, plan.sub_pose, plan.sub_info, kernel,
+                                    self._frame_key)
             used_wheel = split.wheel is not None and wheel.corrected is not None
             if used_wheel:
                 add_wheel_factor(graph, i, wheel.corrected, split.wheel)
@@ -602,7 +654,7 @@ class FusionEstimator:
                 notes.append(f"no IMU: {rep.reason}")
         if used_imu:
             graph.add(gtsam.CombinedImuFactor(X(i - 1), V(i - 1), X(i), V(i), B(i - 1), B(i), pim))
-            nav = pim.predict(gtsam.NavState(prev.pose, prev.velocity), prev.bias)
+            nav = pim.predict(gtsam.NavState(prev.graph_pose, prev.graph_velocity), prev.bias)
             return True, nav.pose(), np.asarray(nav.velocity())
         self.stats.n_no_imu += 1
         omega_cv = None
@@ -621,8 +673,8 @@ class FusionEstimator:
                 self.T_base_lidar, mode=cfg.lidar.restriction,
             ).wheel
             notes.append("no IMU: constant-velocity motion model")
-        pose_guess = prev.pose.compose(gtsam.Pose3(motion))
-        vel_guess = matrix(prev.pose)[:3, :3] @ motion[:3, 3] / dt
+        pose_guess = prev.graph_pose.compose(gtsam.Pose3(motion))
+        vel_guess = matrix(prev.graph_pose)[:3, :3] @ motion[:3, 3] / dt
         add_motion_model_factors(graph, i, motion, omega_cv, vel_guess, dt, cfg)
         return False, pose_guess, vel_guess
 
@@ -634,7 +686,8 @@ class FusionEstimator:
         cfg = self.config
         i = out.index
         T_meas, basis, length = lidar.pose, lidar.basis, lidar.length
-        if out.used_lidar and T_meas is not None and cfg.gravity_tracking_gain > 0.0:
+        if (out.used_lidar and T_meas is not None and cfg.gravity_tracking_gain > 0.0
+                and not cfg.gravity_variable):
             self._track_gravity(T_meas, out.pose, basis, dt)
             out.gravity_tilt = self._gravity_tilt.copy()
         if plan.walk_step is not None and out.used_lidar:
@@ -741,9 +794,30 @@ class FusionEstimator:
     @property
     def gravity_tilt(self) -> np.ndarray:
         """(2,) rotation [rad] about the odometry frame's x and y of the gravity the IMU
-        factors use (``gravity_tracking_gain``); settable, e.g. to carry it over to a new
-        estimator in the same odometry frame."""
+        factors use (``gravity_tracking_gain``, or the newest estimate of the frame variable
+        with ``gravity_variable``); settable, e.g. to carry it over to a new estimator in the
+        same odometry frame (with ``gravity_variable``: the prior mean of the next
+        :meth:`initialize`)."""
+        if self.config.gravity_variable:
+            frame = self._state.frame if self._state is not None else self._frame0
+            return self._tilt_of(frame)
         return self._gravity_tilt.copy()
+
+    @staticmethod
+    def _tilt_of(frame: gtsam.Pose3) -> np.ndarray:
+        """Gravity tilt (about the odometry frame's x and y) of a frame variable value: gravity
+        in the odometry frame is ``R^T (0, 0, -g)``."""
+        return np.asarray(gtsam.Rot3.Logmap(frame.rotation().inverse()), dtype=float)[:2]
+
+    @property
+    def _frame_key(self) -> int | None:
+        return FRAME if self.config.gravity_variable else None
+
+    def _frame_noise(self) -> gtsam.noiseModel.Base:
+        """Prior of the frame variable: tilt ``gravity_variable_sigma``, the gauge held."""
+        sigma = self.config.gravity_variable_sigma
+        return gtsam.noiseModel.Diagonal.Sigmas(
+            np.array([sigma, sigma] + [FRAME_GAUGE_SIGMA] * 4))
 
     @gravity_tilt.setter
     def gravity_tilt(self, tilt: np.ndarray) -> None:
@@ -753,6 +827,10 @@ class FusionEstimator:
         self._set_gravity_tilt(tilt)
 
     def _set_gravity_tilt(self, tilt: np.ndarray, reset_average: bool = False) -> None:
+        if self.config.gravity_variable:  # the IMU factors keep the gravity frame's -z
+            self._frame0 = gtsam.Pose3(gtsam.Rot3.Expmap(np.array([tilt[0], tilt[1], 0.0]))
+                                       .inverse(), np.zeros(3))
+            return
         self._gravity_tilt = np.asarray(tilt, dtype=float).copy()
         if reset_average:
             self._tilt_difference = np.zeros(2)
@@ -805,11 +883,19 @@ class FusionEstimator:
         pose = est.atPose3(X(i))
         vel = np.asarray(est.atVector(V(i)), dtype=float)
         bias = est.atConstantBias(B(i))
-        cov_g = np.asarray(self._isam.marginalCovariance(X(i)), dtype=float)
+        frame = gtsam.Pose3()
+        if self.config.gravity_variable:
+            frame = est.atPose3(FRAME)
+            pose = frame.between(pose)
+            vel = frame.rotation().matrix().T @ vel
+            cov_g = self._odometry_frame_covariance(pose, i)
+        else:
+            cov_g = np.asarray(self._isam.marginalCovariance(X(i)), dtype=float)
         T = matrix(pose)
-        if not finite(T, vel, bias.vector(), cov_g) or not self._sane(T, vel, bias, cov_g):
+        if (not finite(T, vel, bias.vector(), cov_g, matrix(frame))
+                or not self._sane(T, vel, bias, cov_g)):
             return None
-        self._state = _State(t, i, pose, vel, bias, cov_g)
+        self._state = _State(t, i, pose, vel, bias, cov_g, frame)
         self._history.append((t, T))
         out = FusionOutput(
             t=t, index=i, pose=T, velocity=vel,
@@ -817,10 +903,22 @@ class FusionEstimator:
             gyro_bias=np.asarray(bias.gyroscope(), dtype=float),
             covariance=from_gtsam_matrix(cov_g), degenerate_dimension=dim,
             used_lidar=used_lidar, used_imu=used_imu, used_wheel=used_wheel, notes=notes,
-            gravity_tilt=self._gravity_tilt.copy(),
+            gravity_tilt=self.gravity_tilt,
         )
         self.last_output = out
         return out
+
+    def _odometry_frame_covariance(self, pose: gtsam.Pose3, i: int) -> np.ndarray:
+        """6x6 marginal covariance (GTSAM order, body frame) of ``X(i)`` in the odometry frame
+        (``pose``): ``FRAME^-1 X(i)`` perturbed by the frame's ``eta`` and the pose's ``xi``
+        moves by ``xi - Ad(pose^-1) eta``, so the frame's uncertainty (a tilt's lever over
+        the distance from the origin) does not count where the odometry frame is concerned."""
+        joint = self._isam.jointMarginalCovariance([FRAME, X(i)])
+        blocks = [[np.asarray(joint.at(a, b), dtype=float) for b in (FRAME, X(i))]
+                  for a in (FRAME, X(i))]
+        J = np.hstack([-np.asarray(pose.inverse().AdjointMap()), np.eye(6)])
+        cov = J @ np.block(blocks) @ J.T
+        return 0.5 * (cov + cov.T)
 
     def _sane(self, T: np.ndarray, vel: np.ndarray, bias: gtsam.imuBias.ConstantBias,
               cov_g: np.ndarray) -> bool:
@@ -836,21 +934,30 @@ class FusionEstimator:
         )
 
     def _reset(self) -> None:
-        """Rebuild iSAM2 from the joint marginal of the newest (X, V, B)."""
+        """Rebuild iSAM2 from the joint marginal of the newest (X, V, B) and, with
+        ``gravity_variable``, the frame variable."""
         s = self._state
         keys = [X(s.index), V(s.index), B(s.index)]
         lin = gtsam.Values()
-        lin.insert(keys[0], s.pose)
-        lin.insert(keys[1], s.velocity)
+        lin.insert(keys[0], s.graph_pose)
+        lin.insert(keys[1], s.graph_velocity)
         lin.insert(keys[2], s.bias)
+        if self.config.gravity_variable:
+            keys.append(FRAME)
+            lin.insert(FRAME, s.frame)
         graph = gtsam.NonlinearFactorGraph()
         try:
-            info = np.asarray(self._isam.jointMarginalInformation(keys).fullMatrix(), dtype=float)
-            if info.shape != (15, 15) or not finite(info):
-                raise ValueError("bad joint marginal")
-            R = np.linalg.qr(sqrt_information(info), mode="r")
-            jf = gtsam.JacobianFactor(keys[0], R[:, 0:6], keys[1], R[:, 6:9], keys[2],
-                                      R[:, 9:15], np.zeros(15), gtsam.noiseModel.Unit.Create(15))
+            if self.config.gravity_variable:
+                jf = _joint_prior(self._isam.jointMarginalInformation(keys), keys)
+            else:
+                info = np.asarray(self._isam.jointMarginalInformation(keys).fullMatrix(),
+                                  dtype=float)
+                if info.shape != (15, 15) or not finite(info):
+                    raise ValueError("bad joint marginal")
+                R = np.linalg.qr(sqrt_information(info), mode="r")
+                jf = gtsam.JacobianFactor(keys[0], R[:, 0:6], keys[1], R[:, 6:9], keys[2],
+                                          R[:, 9:15], np.zeros(15),
+                                          gtsam.noiseModel.Unit.Create(15))
             graph.add(gtsam.LinearContainerFactor(jf, lin))
             isam = self._new_isam()
             isam.update(graph, lin)
@@ -873,13 +980,18 @@ class FusionEstimator:
             pose_noise = gtsam.noiseModel.Gaussian.Covariance(cov)
         except RuntimeError:
             pose_noise = gtsam.noiseModel.Isotropic.Sigma(6, 1.0)
-        graph.add(gtsam.PriorFactorPose3(X(s.index), s.pose, pose_noise))
-        graph.add(gtsam.PriorFactorVector(V(s.index), s.velocity, gtsam.noiseModel.Isotropic.Sigma(
-            3, cfg.prior_sigma_velocity_moving)))
+        if cfg.gravity_variable:  # the frame as it stands: the bias is reset around it
+            graph.add(gtsam.PriorFactorPose3(FRAME, s.frame, gtsam.noiseModel.Isotropic.Sigma(
+                6, FRAME_GAUGE_SIGMA)))
+            values.insert(FRAME, s.frame)
+        graph.add(absolute_factor(X(s.index), matrix(s.pose), pose_noise, self._frame_key))
+        graph.add(gtsam.PriorFactorVector(V(s.index), s.graph_velocity,
+                                          gtsam.noiseModel.Isotropic.Sigma(
+                                              3, cfg.prior_sigma_velocity_moving)))
         graph.add(gtsam.PriorFactorConstantBias(B(s.index), s.bias, gtsam.noiseModel.Diagonal.Sigmas(
             np.array([cfg.imu.accel_bias_prior_sigma] * 3 + [cfg.imu.gyro_bias_prior_sigma] * 3))))
-        values.insert(X(s.index), s.pose)
-        values.insert(V(s.index), s.velocity)
+        values.insert(X(s.index), s.graph_pose)
+        values.insert(V(s.index), s.graph_velocity)
         values.insert(B(s.index), s.bias)
         isam = self._new_isam()
         isam.update(graph, values)
@@ -896,8 +1008,7 @@ class FusionEstimator:
         self._anchor_walk = 0.0
         self._kernel_holdoff = self.config.lidar.robust_after_updates
         if self._consecutive_failures >= 3:
-            prev = _State(prev.t, prev.index, prev.pose, np.zeros(3),
-                          gtsam.imuBias.ConstantBias(), prev.cov_gtsam)
+            prev = replace(prev, velocity=np.zeros(3), bias=gtsam.imuBias.ConstantBias())
         self._state = prev
         try:
             self._isam = self._priors_isam(prev)
@@ -980,7 +1091,8 @@ class FusionEstimator:
             covered = integrate(self.imu, probe, s.t, t_max, cfg.imu.max_gap_s,
                                 cfg.imu.max_extrapolation_s, self._lever_arm).covered
         if covered:
-            nav0 = gtsam.NavState(s.pose, s.velocity)
+            nav0 = gtsam.NavState(s.graph_pose, s.graph_velocity)
+            to_odom = np.linalg.inv(matrix(s.frame)) if cfg.gravity_variable else None
             knots = self.imu.knots(s.t, t_max, cfg.imu.max_extrapolation_s)
             pim = gtsam.PreintegratedCombinedMeasurements(self._params, s.bias)
             kt = [k[0] for k in knots]
@@ -1004,6 +1116,8 @@ class FusionEstimator:
                     integrate_piece(pim, acc_cur, aq, gyr_cur, gq, tq - t_cur, self._lever_arm)
                     t_cur, acc_cur, gyr_cur = tq, aq, gq
                 out[k] = matrix(pim.predict(nav0, s.bias).pose())
+                if to_odom is not None:
+                    out[k] = to_odom @ out[k]
             return out
         for k in order:
             tq = float(times[k])

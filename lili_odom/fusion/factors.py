@@ -11,6 +11,12 @@ this boundary (:func:`to_gtsam_matrix`). GTSAM's ``BetweenFactorPose3`` error is
 * :func:`add_wheel_factor`: the wheel increment, with its information restricted to the
   degenerate subspace.
 * :func:`add_motion_model_factors`: what replaces the IMU factor on an interval without IMU.
+
+With ``frame`` (the key of the odometry frame's pose in the gravity frame,
+``FusionConfig.gravity_variable``) the poses ``X(i)`` are in the gravity frame and an absolute
+factor at a pose ``T`` of the odometry frame is a ``BetweenFactorPose3(frame, X(i), T)``
+(error ``Logmap(T^-1 F^-1 X(i))``, the prior's error on the pose in the odometry frame);
+without it a ``PriorFactorPose3(X(i), T)``. Relative factors are the same in both frames.
 """
 from __future__ import annotations
 
@@ -25,7 +31,7 @@ from lili_odom.fusion.config import FusionConfig
 from lili_odom.fusion.subspace import restrict_information, sqrt_information
 from lili_odom.geometry import orthonormalize
 
-__all__ = ["add_lidar_factors", "add_motion_model_factors", "add_subspace_factor",
+__all__ = ["absolute_factor", "add_lidar_factors", "add_motion_model_factors", "add_subspace_factor",
            "add_wheel_factor", "from_gtsam_matrix", "noise_from_information", "robust_kernel",
            "to_gtsam_matrix"]
 
@@ -70,9 +76,18 @@ def _robust(noise: gtsam.noiseModel.Base, kernel: Any) -> gtsam.noiseModel.Base:
     return noise if kernel is None else gtsam.noiseModel.Robust.Create(kernel, noise)
 
 
+def absolute_factor(key: int, pose: np.ndarray, noise: gtsam.noiseModel.Base,
+                    frame: int | None = None) -> gtsam.NonlinearFactor:
+    """A factor on the pose ``key`` at ``pose`` (4x4, odometry frame): a prior, or with
+    ``frame`` a between factor from the odometry frame's pose in the gravity frame."""
+    if frame is None:
+        return gtsam.PriorFactorPose3(key, gtsam.Pose3(pose), noise)
+    return gtsam.BetweenFactorPose3(frame, key, gtsam.Pose3(pose), noise)
+
+
 def add_lidar_factors(graph: gtsam.NonlinearFactorGraph, i: int, form: str,
                       T_prev: np.ndarray, T_meas: np.ndarray, target: np.ndarray,
-                      information: np.ndarray, kernel: Any) -> None:
+                      information: np.ndarray, kernel: Any, frame: int | None = None) -> None:
     """The registration's factor(s) on ``X(i)``.
 
     ``form`` ``"prior"``: a ``PriorFactorPose3`` at ``target`` (the registration, its
@@ -80,16 +95,17 @@ def add_lidar_factors(graph: gtsam.NonlinearFactorGraph, i: int, form: str,
     ``BetweenFactorPose3`` from ``X(i-1)`` with ``Z = T_prev^-1 T_meas``; ``"hybrid"``: the prior
     with ``information`` restricted to translation and yaw, the between factor with it
     restricted to roll and pitch. ``T_prev``: previous fused pose, ``T_meas``: registration
-    (4x4, base_link in the odometry frame); ``kernel``: M-estimator or None.
+    (4x4, base_link in the odometry frame); ``kernel``: M-estimator or None; ``frame``: key
+    of the odometry frame in the gravity frame, or None (:func:`absolute_factor`).
     """
     if form == "prior":
         noise = _robust(noise_from_information(information), kernel)
-        graph.add(gtsam.PriorFactorPose3(X(i), gtsam.Pose3(target), noise))
+        graph.add(absolute_factor(X(i), target, noise, frame))
     elif form == "hybrid":
         Z = orthonormalize(np.linalg.inv(T_prev) @ T_meas)
         absolute = _robust(noise_from_information(
             restrict_information(information, NOT_TILT, TILT)), kernel)
-        graph.add(gtsam.PriorFactorPose3(X(i), gtsam.Pose3(target), absolute))
+        graph.add(absolute_factor(X(i), target, absolute, frame))
         relative = _robust(noise_from_information(
             restrict_information(information, TILT, NOT_TILT)), kernel)
         graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(Z), relative))
@@ -100,11 +116,11 @@ def add_lidar_factors(graph: gtsam.NonlinearFactorGraph, i: int, form: str,
 
 
 def add_subspace_factor(graph: gtsam.NonlinearFactorGraph, i: int, pose: np.ndarray,
-                        information: np.ndarray, kernel: Any) -> None:
-    """A ``PriorFactorPose3`` on ``X(i)`` at the subspace-refined registration ``pose`` (4x4)
-    with its base_link ``(v, w)`` ``information``."""
+                        information: np.ndarray, kernel: Any, frame: int | None = None) -> None:
+    """An absolute factor (:func:`absolute_factor`) on ``X(i)`` at the subspace-refined
+    registration ``pose`` (4x4) with its base_link ``(v, w)`` ``information``."""
     noise = _robust(noise_from_information(information), kernel)
-    graph.add(gtsam.PriorFactorPose3(X(i), gtsam.Pose3(pose), noise))
+    graph.add(absolute_factor(X(i), pose, noise, frame))
 
 
 def add_wheel_factor(graph: gtsam.NonlinearFactorGraph, i: int, delta: np.ndarray,
