@@ -517,7 +517,7 @@ def _turn_under_a_tilted_map(gain: float, delta: float = 0.01, n: int = 300,
     """Level robot turning in place at 0.3 rad/s, IMU exact; the registrations come from a map
     whose frame is tilted by ``delta`` [rad] about x (what an accelerometer bias taken for
     gravity at the start leaves). Returns (last output, mean |registration - fused| tilt of
-    the last 50 updates [rad])."""
+    the last 50 updates [rad], the estimator)."""
     wz = 0.3
     cfg = config(gravity_align=False, gravity_tracking_gain=gain, **overrides)
     est = FusionEstimator(cfg)
@@ -532,14 +532,14 @@ def _turn_under_a_tilted_map(gain: float, delta: float = 0.01, n: int = 300,
         out = est.update(t, meas)
         assert out is not None
         diffs.append(np.linalg.norm(log(meas @ np.linalg.inv(out.pose))[3:5]))
-    return out, float(np.mean(diffs[-50:]))
+    return out, float(np.mean(diffs[-50:])), est
 
 
 def test_gravity_tracking_follows_the_map_frame_through_a_turn() -> None:
     """Without tracking the IMU pulls the estimate off the map's tilt once the turn separates
     bias from tilt; with it, gravity is rotated into the map's frame and the two agree."""
-    out0, diff0 = _turn_under_a_tilted_map(0.0)
-    out1, diff1 = _turn_under_a_tilted_map(0.02)
+    out0, diff0, _ = _turn_under_a_tilted_map(0.0)
+    out1, diff1, _ = _turn_under_a_tilted_map(0.02)
     np.testing.assert_allclose(out0.gravity_tilt, 0.0)
     assert diff0 > 0.002, diff0
     assert diff1 < 0.5 * diff0, (diff1, diff0)
@@ -550,17 +550,41 @@ def test_gravity_variable_takes_the_map_frames_tilt_with_the_bias() -> None:
     """As a graph variable, the tilt between the map's frame and gravity is estimated with
     the accelerometer bias: at rest the two share the reading, the turn tells them apart,
     and the estimate agrees with the tilted map without a gain."""
-    _, diff0 = _turn_under_a_tilted_map(0.0)
-    out, diff = _turn_under_a_tilted_map(0.0, gravity_variable=True)
+    _, diff0, _ = _turn_under_a_tilted_map(0.0)
+    out, diff, _ = _turn_under_a_tilted_map(0.0, gravity_variable=True)
     assert diff < 0.25 * diff0, (diff, diff0)
     np.testing.assert_allclose(out.gravity_tilt, [0.01, 0.0], atol=0.002)
     np.testing.assert_allclose(out.accel_bias, 0.0, atol=0.2 * G * 0.01)
 
 
+def test_gravity_variable_reports_the_covariance_in_the_odometry_frame() -> None:
+    """Far from the origin a tilt of the gravity frame moves the graph's poses by its lever
+    (the distance times the tilt), not the odometry frame's: the reported covariance is the
+    odometry frame's, as without the variable."""
+    covs = []
+    for variable in (False, True):
+        est = FusionEstimator(config(gravity_align=False, gravity_variable=variable,
+                                     gravity_tracking_gain=0.0))
+        feed_imu(est, -1.0, 0.0, (0.0, 0.0, G))
+        est.initialize(0.0, pose=np.eye(4), velocity=np.array([2.0, 0.0, 0.0]),
+                       velocity_sigma=0.01)
+        for k in range(1, 151):  # 30 m along x at 2 m/s
+            t = 0.1 * k
+            feed_imu(est, t - 0.09, t, (0.0, 0.0, G))
+            out = est.update(t, pose(t=(2.0 * t, 0.0, 0.0)))
+            assert out is not None
+        covs.append(out.covariance)
+        np.testing.assert_allclose(out.pose[:3, 3], [30.0, 0.0, 0.0], atol=1e-3)
+    lever = (30.0 * est.config.gravity_variable_sigma) ** 2  # what the graph frame's z has
+    assert covs[1][2, 2] < 0.01 * lever, (covs[1][2, 2], lever)
+    np.testing.assert_allclose(np.diag(covs[1]), np.diag(covs[0]), rtol=0.5)
+
+
 def test_gravity_variable_survives_graph_resets_and_recovery() -> None:
     """The frame variable is carried through the periodic reset (joint marginal with the
     newest state) and through a rebuild after a solver failure."""
-    out, diff = _turn_under_a_tilted_map(0.0, n=120, gravity_variable=True, reset_every=7)
+    out, diff, est = _turn_under_a_tilted_map(0.0, n=120, gravity_variable=True, reset_every=7)
+    assert est.stats.n_resets >= 15 and est.stats.n_reset_fallbacks == 0, est.stats
     assert diff < 0.002, diff
     np.testing.assert_allclose(out.gravity_tilt, [0.01, 0.0], atol=0.003)
     est = FusionEstimator(config(gravity_align=False, gravity_variable=True))
