@@ -374,8 +374,9 @@ def test_graph_stays_bounded_and_time_flat() -> None:
     assert last < 3 * first + 1e-3
 
 
-def test_reset_preserves_covariance() -> None:
-    est = FusionEstimator(config(reset_every=10))
+@pytest.mark.parametrize("variable", [True, False])
+def test_reset_preserves_covariance(variable: bool) -> None:
+    est = FusionEstimator(config(reset_every=10, gravity_variable=variable))
     feed_imu(est, -1.0, 1.05, (0.0, 0.0, G))
     est.initialize(0.0)
     for i in range(1, 10):
@@ -383,7 +384,7 @@ def test_reset_preserves_covariance() -> None:
     before = est._isam.marginalCovariance(gtsam.symbol_shorthand.X(9))
     out = est.update(1.0, np.eye(4), degeneracy([1, 0, 0, 0, 0, 0]))
     assert est.stats.n_resets == 1 and est.graph_size == 1
-    after = est._isam.marginalCovariance(gtsam.symbol_shorthand.X(10))
+    after = est._pose_covariance(est._state.pose, 10)  # from the graph rebuilt at the reset
     np.testing.assert_allclose(np.diag(after), np.diag(est._state.cov_gtsam), rtol=1e-3)
     assert np.all(np.diag(out.covariance) > 0) and before.shape == (6, 6)
 
@@ -487,12 +488,18 @@ def test_random_garbage_never_raises_and_recovers(seed: int) -> None:
     assert all(o is not None and o.used_imu for o in ok)
 
 
-@pytest.mark.parametrize("factor", ["between", "prior"])
-def test_accelerometer_bias_recovered_while_driving_a_degenerate_axis(factor: str) -> None:
+@pytest.mark.parametrize("factor, variable", [("between", False), ("prior", False),
+                                              ("prior", True), ("hybrid", True)])
+def test_accelerometer_bias_recovered_while_driving_a_degenerate_axis(factor: str,
+                                                                       variable: bool) -> None:
     """Level start, constant accelerometer bias, 1 m/s along x with x degenerate (wheels there):
-    the LiDAR holds the other directions, so the bias must be found, not absorbed elsewhere."""
+    the LiDAR holds the other directions, so the bias must be found, not absorbed elsewhere.
+    With the start's tilt a variable (``gravity_variable``), driving straight cannot tell the
+    bias from the frame's tilt: what must be found is their sum, the reading they explain.
+    (The variable needs an absolute LiDAR factor to tie the frames: with ``between`` alone the
+    lateral velocity is left 1 cm/s off.)"""
     bias = np.array([-0.027, -0.081, 0.0])
-    cfg = config(gravity_align=False)
+    cfg = config(gravity_align=False, gravity_variable=variable)
     cfg.lidar.factor = factor
     est = FusionEstimator(cfg)
     feed_imu(est, -1.0, 0.0, (bias + [0, 0, G]).tolist())
@@ -507,7 +514,10 @@ def test_accelerometer_bias_recovered_while_driving_a_degenerate_axis(factor: st
         est.add_wheel(t, pose(t=(t, 0, 0)))
         out = est.update(t, pose(t=(t, 0, 0)), degeneracy([1, 0, 0, 0, 0, 0]))
         assert out is not None
-    assert np.allclose(out.accel_bias[:2], bias[:2], atol=0.01), out.accel_bias
+    # the estimated body's specific force at rest under the gravity tilted by gravity_tilt
+    R_tilt = exp(np.array([0, 0, 0, *out.gravity_tilt, 0]))[:3, :3]
+    explained = out.accel_bias[:2] + (out.pose[:3, :3].T @ R_tilt @ [0.0, 0.0, G])[:2]
+    assert np.allclose(explained, bias[:2], atol=0.01), (out.accel_bias, out.gravity_tilt)
     assert abs(out.velocity[1]) < 0.01 and abs(out.velocity[0] - 1.0) < 0.01, out.velocity
     assert abs(out.pose[0, 3] - 20.0) < 0.05 and abs(out.pose[1, 3]) < 0.01
 
@@ -519,6 +529,7 @@ def _turn_under_a_tilted_map(gain: float, delta: float = 0.01, n: int = 300,
     gravity at the start leaves). Returns (last output, mean |registration - fused| tilt of
     the last 50 updates [rad], the estimator)."""
     wz = 0.3
+    overrides = {"gravity_variable": False, **overrides}
     cfg = config(gravity_align=False, gravity_tracking_gain=gain, **overrides)
     est = FusionEstimator(cfg)
     tilt = exp(np.array([0, 0, 0, delta, 0, 0]))
@@ -552,7 +563,7 @@ def test_gravity_variable_takes_the_map_frames_tilt_with_the_bias() -> None:
     and the estimate agrees with the tilted map without a gain."""
     _, diff0, _ = _turn_under_a_tilted_map(0.0)
     out, diff, _ = _turn_under_a_tilted_map(0.0, gravity_variable=True)
-    assert diff < 0.25 * diff0, (diff, diff0)
+    assert diff0 > 0.005 and diff < 1e-4, (diff, diff0)
     np.testing.assert_allclose(out.gravity_tilt, [0.01, 0.0], atol=0.002)
     np.testing.assert_allclose(out.accel_bias, 0.0, atol=0.2 * G * 0.01)
 
@@ -602,7 +613,8 @@ def test_gravity_variable_survives_graph_resets_and_recovery() -> None:
 
 
 def test_gravity_tracking_is_bounded_and_gated() -> None:
-    cfg = config(gravity_align=False, gravity_tracking_gain=1.0, gravity_tracking_max=0.004)
+    cfg = config(gravity_align=False, gravity_tracking_gain=1.0, gravity_tracking_max=0.004,
+                 gravity_variable=False)
     est = FusionEstimator(cfg)
     feed_imu(est, -1.0, 0.0, (0.0, 0.0, G))
     est.initialize(0.0, pose=np.eye(4), velocity=np.zeros(3))

@@ -386,14 +386,29 @@ def test_inner_clock_jump_forwards_does_not_integrate_over_the_gap():
 def test_inner_clock_jump_forwards_without_other_sensors_in_between():
     sim = Sim()
     sim.run(T0, 2.0)
-    sim.pipe.estimator.gravity_tilt = [1e-3, -2e-3]  # as gravity tracking may have left it
+    old = sim.pipe.estimator
     after = sim.run(T0 + 100.0, 2.0)  # everything jumps by 98 s (e.g. a paused bag)
     ok = _ok(after)
     assert sim.pipe.counters["forward_gaps"] == 1 and sim.pipe.counters["resets"] == 0
     assert len(ok) >= len(after) - 1 and _max_offset(after) < 0.1
     assert all(o.details["used_imu"] for o in ok[3:])
-    # the map is kept, so is the frame's gravity (tracking, on by default, then moves it by
-    # a few microradians in 2 s; a reset would have put it back to zero)
+    # the map is kept, so is the frame's tilt (the graph variable, on by default): the new
+    # estimator starts from the old one's estimate, where a reset would start from zero
+    assert sim.pipe.estimator is not old and np.linalg.norm(old.gravity_tilt) > 1e-4
+    np.testing.assert_allclose(after[0].details["gravity_tilt"], old.gravity_tilt, atol=1e-9)
+
+
+@inner
+def test_inner_clock_jump_keeps_the_tracked_gravity():
+    """The same with gravity tracking's gain instead of the variable."""
+    from lili_odom.fusion.config import FusionConfig
+
+    sim = Sim(fusion=FusionConfig(gravity_variable=False))
+    sim.run(T0, 2.0)
+    sim.pipe.estimator.gravity_tilt = [1e-3, -2e-3]  # as gravity tracking may have left it
+    sim.run(T0 + 100.0, 2.0)
+    assert sim.pipe.counters["forward_gaps"] == 1
+    # tracking then moves it by a few microradians in 2 s; a reset would put it back to zero
     np.testing.assert_allclose(sim.pipe.estimator.gravity_tilt, [1e-3, -2e-3], atol=1e-4)
 
 

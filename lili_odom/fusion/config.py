@@ -162,8 +162,8 @@ class FusionConfig:
             preceding the first stamp (only when no initial pose is given).
         gravity_window_s: length of that IMU window [s].
         estimate_gyro_bias_at_rest: start the gyro bias at the mean rate when at rest.
-        gravity_tracking_gain: the direction of gravity in the odometry frame is tracked
-            (0 = always the frame's -z). At rest the accelerometer cannot tell its bias from a
+        gravity_tracking_gain: with ``gravity_variable`` off, the direction of gravity in the
+            odometry frame is tracked (0 = always the frame's -z). At rest the accelerometer cannot tell its bias from a
             tilt, so the start's gravity alignment takes a bias ``b`` as a tilt of about
             ``b / g`` and the local map is built in that frame; once a turn makes the bias
             observable, the IMU pulls the estimate towards true gravity, away from the map.
@@ -184,7 +184,7 @@ class FusionConfig:
             it with a gain (the ``gravity_tracking_*`` parameters are then unused). The
             odometry frame (the local map's) stays the start's gravity-aligned frame; the
             IMU factors act in a gravity frame tilted from it by the variable, and the
-            LiDAR's absolute factors tie the two. Default off.
+            LiDAR's absolute factors tie the two. Default on.
         gravity_variable_sigma: prior standard deviation of that tilt about x and y [rad]
             (an accelerometer bias ``b`` taken for gravity at the start tilts the frame by
             about ``b / g``; default 0.01, about ``imu.accel_bias_prior_sigma / g``).
@@ -239,7 +239,7 @@ class FusionConfig:
     gravity_tracking_deadband: float = 0.0
     gravity_tracking_max: float = 0.035
     gravity_tracking_gate: float = 0.05
-    gravity_variable: bool = False
+    gravity_variable: bool = True
     gravity_variable_sigma: float = 0.01
     wheel_weak_scale: float = 0.0
     wheel_restriction: str = "weighted"

@@ -888,9 +888,7 @@ class FusionEstimator:
             frame = est.atPose3(FRAME)
             pose = frame.between(pose)
             vel = frame.rotation().matrix().T @ vel
-            cov_g = self._odometry_frame_covariance(pose, i)
-        else:
-            cov_g = np.asarray(self._isam.marginalCovariance(X(i)), dtype=float)
+        cov_g = self._pose_covariance(pose, i)
         T = matrix(pose)
         if (not finite(T, vel, bias.vector(), cov_g, matrix(frame))
                 or not self._sane(T, vel, bias, cov_g)):
@@ -908,11 +906,14 @@ class FusionEstimator:
         self.last_output = out
         return out
 
-    def _odometry_frame_covariance(self, pose: gtsam.Pose3, i: int) -> np.ndarray:
-        """6x6 marginal covariance (GTSAM order, body frame) of ``X(i)`` in the odometry frame
-        (``pose``): ``FRAME^-1 X(i)`` perturbed by the frame's ``eta`` and the pose's ``xi``
-        moves by ``xi - Ad(pose^-1) eta``, so the frame's uncertainty (a tilt's lever over
-        the distance from the origin) does not count where the odometry frame is concerned."""
+    def _pose_covariance(self, pose: gtsam.Pose3, i: int) -> np.ndarray:
+        """6x6 marginal covariance (GTSAM order, body frame) of state ``i``'s pose in the
+        odometry frame (``pose``). With ``gravity_variable``, ``FRAME^-1 X(i)`` perturbed by
+        the frame's ``eta`` and the pose's ``xi`` moves by ``xi - Ad(pose^-1) eta``, so the
+        frame's uncertainty (a tilt's lever over the distance from the origin) does not count
+        where the odometry frame is concerned."""
+        if not self.config.gravity_variable:
+            return np.asarray(self._isam.marginalCovariance(X(i)), dtype=float)
         joint = self._isam.jointMarginalCovariance([FRAME, X(i)])
         blocks = [[np.asarray(joint.at(a, b), dtype=float) for b in (FRAME, X(i))]
                   for a in (FRAME, X(i))]
