@@ -159,9 +159,10 @@ class FusionOutput:
         degenerate_dimension: dimension of the degenerate subspace used for this update.
         used_lidar / used_imu / used_wheel: which measurements entered the update.
         notes: human-readable remarks (fallbacks, rejected inputs).
-        gravity_tilt: (2,) rotation [rad] about the odometry frame's x and y axes of the
-            gravity the IMU factors use from this update on
-            (``FusionConfig.gravity_tracking_gain``; zero without tracking).
+        gravity_tilt: (2,) rotation [rad] about the odometry frame's x and y axes of
+            gravity: the estimate of the frame variable (``FusionConfig.gravity_variable``),
+            or the gravity the IMU factors use from this update on
+            (``gravity_tracking_gain``; zero without tracking).
     """
 
     t: float
