@@ -163,8 +163,9 @@ class FusionConfig:
         gravity_window_s: length of that IMU window [s].
         estimate_gyro_bias_at_rest: start the gyro bias at the mean rate when at rest.
         gravity_tracking_gain: with ``gravity_variable`` off, the direction of gravity in the
-            odometry frame is tracked (0 = always the frame's -z). At rest the accelerometer cannot tell its bias from a
-            tilt, so the start's gravity alignment takes a bias ``b`` as a tilt of about
+            odometry frame is tracked (0 = always the frame's -z). At rest the accelerometer
+            cannot tell its bias from a tilt, so the start's gravity alignment takes a bias
+            ``b`` as a tilt of about
             ``b / g`` and the local map is built in that frame; once a turn makes the bias
             observable, the IMU pulls the estimate towards true gravity, away from the map.
             With a gain, each LiDAR update moves the gravity used by the IMU preintegration

@@ -804,6 +804,13 @@ class FusionEstimator:
             return self._tilt_of(frame)
         return self._gravity_tilt.copy()
 
+    @gravity_tilt.setter
+    def gravity_tilt(self, tilt: np.ndarray) -> None:
+        tilt = np.asarray(tilt, dtype=float).reshape(2)
+        if not finite(tilt):
+            raise ValueError("gravity tilt must be finite")
+        self._set_gravity_tilt(tilt)
+
     @staticmethod
     def _tilt_of(frame: gtsam.Pose3) -> np.ndarray:
         """Gravity tilt (about the odometry frame's x and y) of a frame variable value: gravity
@@ -819,13 +826,6 @@ class FusionEstimator:
         sigma = self.config.gravity_variable_sigma
         return gtsam.noiseModel.Diagonal.Sigmas(
             np.array([sigma, sigma] + [FRAME_GAUGE_SIGMA] * 4))
-
-    @gravity_tilt.setter
-    def gravity_tilt(self, tilt: np.ndarray) -> None:
-        tilt = np.asarray(tilt, dtype=float).reshape(2)
-        if not finite(tilt):
-            raise ValueError("gravity tilt must be finite")
-        self._set_gravity_tilt(tilt)
 
     def _set_gravity_tilt(self, tilt: np.ndarray, reset_average: bool = False) -> None:
         if self.config.gravity_variable:  # the IMU factors keep the gravity frame's -z
