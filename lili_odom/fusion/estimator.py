@@ -80,7 +80,7 @@ Bounded graph: plain ``gtsam.ISAM2`` (QR factorisation — Cholesky hit "indeter
 system" after ~300 keyframes in our tests because the absolute pose information decays while
 the bias random-walk information is ~1e9) and every ``reset_every`` keyframes the graph is
 rebuilt from a single ``LinearContainerFactor`` holding the joint marginal information of the
-newest ``X, V, B`` (so cross-correlations survive, unlike per-variable priors).
+newest ``X, V, B`` (and ``FRAME``) (so cross-correlations survive, unlike per-variable priors).
 ``IncrementalFixedLagSmoother`` exists in the wheel but has open marginalisation bugs for
 exactly this X/V/B chain (borglab/gtsam#1638), so it is not used.
 """
