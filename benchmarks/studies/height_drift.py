@@ -40,14 +40,12 @@ JUMP_WINDOW_S = 3.0
 
 
 def true_accel_bias(seed: int) -> list[float]:
-    """The simulated IMU's turn-on accelerometer bias [m/s^2] (IMU frame) for ``seed``, drawn
-    as :func:`lili_odom.sim.imu.simulate_imu` draws it."""
+    """The simulated IMU's turn-on accelerometer bias [m/s^2] (IMU frame) for ``seed``
+    (:func:`lili_odom.sim.imu.turn_on_biases` with the simulator's default IMU)."""
+    from lili_odom.sim.imu import turn_on_biases
     from lili_odom.sim.sensors import ImuConfig
 
-    cfg = ImuConfig()
-    rng = np.random.default_rng([seed, 7101])
-    rng.normal(0.0, cfg.gyro_bias_sigma0, 3)
-    return [float(v) for v in rng.normal(0.0, cfg.accel_bias_sigma0, 3)]
+    return [float(v) for v in turn_on_biases(ImuConfig(), seed)[1]]
 
 
 def height_error(stamps: np.ndarray, poses: np.ndarray, truth_stamps: np.ndarray,

@@ -441,8 +441,7 @@ def _planes(reference: ReferenceMap, q: np.ndarray, cfg: PlaneRefinementConfig
         reach = dist[rest[blob], -1] ** 2  # dist rows are q's rows
         closed = lam <= cfg.max_blob_spread * reach[:, None]
         first = closed[:, 0]  # ascending: no axis is closed when the smallest is not
-        rows = rest[blob]
-        rows, axes, closed, cb = rows[first], axes[first], closed[first], c_rest[blob][first]
+        rows, axes, closed, cb = rest[blob][first], axes[first], closed[first], c_rest[blob][first]
         valid[rows] = True
         normals[rows] = axes[:, 0]
         centroids[rows] = cb

@@ -15,7 +15,7 @@ import numpy as np
 from lili_odom.sim.sensors import ImuConfig
 from lili_odom.sim.trajectory import Trajectory
 
-__all__ = ["ImuData", "simulate_imu", "true_imu"]
+__all__ = ["ImuData", "simulate_imu", "true_imu", "turn_on_biases"]
 
 
 @dataclass
@@ -38,6 +38,22 @@ def true_imu(traj: Trajectory, t: np.ndarray, T_base_imu: np.ndarray, gravity: f
     return k.omega, f_body
 
 
+def _imu_rng(seed: int) -> np.random.Generator:
+    return np.random.default_rng([seed, 7101])
+
+
+def _draw_turn_on(rng: np.random.Generator, cfg: ImuConfig) -> tuple[np.ndarray, np.ndarray]:
+    bg0 = rng.normal(0.0, cfg.gyro_bias_sigma0, 3)
+    ba0 = rng.normal(0.0, cfg.accel_bias_sigma0, 3)
+    return bg0, ba0
+
+
+def turn_on_biases(cfg: ImuConfig, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(gyro [rad/s], accelerometer [m/s^2]) turn-on biases, ``os_imu`` frame, that
+    :func:`simulate_imu` starts its random walks from for ``seed``."""
+    return _draw_turn_on(_imu_rng(seed), cfg)
+
+
 def simulate_imu(traj: Trajectory, T_base_imu: np.ndarray, cfg: ImuConfig, seed: int,
                  t_end: float | None = None) -> ImuData:
     """IMU samples at ``cfg.rate_hz`` from t = 0 to ``t_end`` (default: trajectory end).
@@ -48,10 +64,9 @@ def simulate_imu(traj: Trajectory, T_base_imu: np.ndarray, cfg: ImuConfig, seed:
     dt = 1.0 / cfg.rate_hz
     t = np.arange(0.0, t_end + 1e-9, dt)
     n = len(t)
-    rng = np.random.default_rng([seed, 7101])
+    rng = _imu_rng(seed)
     w, f = true_imu(traj, t, T_base_imu, cfg.gravity)
-    bg0 = rng.normal(0.0, cfg.gyro_bias_sigma0, 3)
-    ba0 = rng.normal(0.0, cfg.accel_bias_sigma0, 3)
+    bg0, ba0 = _draw_turn_on(rng, cfg)
     bg = bg0 + np.cumsum(rng.normal(0.0, cfg.gyro_bias_walk * np.sqrt(dt), (n, 3)), 0)
     ba = ba0 + np.cumsum(rng.normal(0.0, cfg.accel_bias_walk * np.sqrt(dt), (n, 3)), 0)
     gyro = w + bg + rng.normal(0.0, cfg.gyro_sigma, (n, 3))
