@@ -30,7 +30,11 @@ if TYPE_CHECKING:
     from lili_odom.fusion.estimator import FusionStats
 
 __all__ = ["LidarMeasurement", "WheelIncrement", "as_pose", "finite", "lidar_measurement",
-           "plausible", "wheel_increment"]
+           "plausible", "registration_information", "wheel_increment"]
+
+#: Largest standard deviation [m, scaled twists] the plane fits' covariance contributes to
+#: :func:`registration_information` along a direction they hold less (or not at all).
+MAX_PLANE_SIGMA = 1.0
 
 
 def finite(*arrays: Any) -> bool:
@@ -86,6 +90,29 @@ class LidarMeasurement:
     basis: np.ndarray
     length: float
     information: np.ndarray
+
+
+def registration_information(configured: np.ndarray, planes: np.ndarray,
+                             length: float) -> np.ndarray:
+    """The registration's ``(v, w)`` information in the LiDAR body frame (6x6) from the
+    configured one and the scan's point-to-plane information: their covariances add.
+
+    ``configured``: 6x6 ``(v, w)`` information (``FusionConfig.lidar.information``), the
+    floor of the registration's error however well the scene holds it. ``planes``: 6x6
+    debiased point-to-plane information of the registration [1/m^2] over the scaled LiDAR
+    body twists ``(v, L w)`` with characteristic length ``length`` L [m]; a direction it holds
+    with less than ``1 / MAX_PLANE_SIGMA^2`` counts with that much. Where the planes hold
+    every direction far better than the configured sigmas the result is about
+    ``configured``; where they hold one weakly (sparse open ground) it is about the planes'
+    own, so the fusion weighs the IMU against the registration by what the scene holds.
+    """
+    w, V = np.linalg.eigh(0.5 * (planes + planes.T))
+    variances = 1.0 / np.maximum(w, MAX_PLANE_SIGMA**-2)
+    unscale = np.diag([1.0, 1.0, 1.0, 1.0 / length, 1.0 / length, 1.0 / length])
+    plane_cov = unscale @ (V * variances) @ V.T @ unscale  # scaled -> plain (v, w)
+    cov = np.linalg.inv(configured) + plane_cov
+    info = np.linalg.inv(cov)
+    return 0.5 * (info + info.T)
 
 
 def lidar_measurement(T_icp: Any, degeneracy: Any, lidar_information: Any, T_prev: np.ndarray,

@@ -51,6 +51,7 @@ from lili_odom.errors import ThrottledWarnings
 from lili_odom.fusion.config import FusionConfig
 from lili_odom.degeneracy.subspace import orthonormal_rows
 from lili_odom.fusion.estimator import FusionEstimator, SubspaceMeasurement
+from lili_odom.fusion.measurements import registration_information
 from lili_odom.fusion.subspace import remap_pose, scaled_lidar_to_base
 from lili_odom.pipeline.detection_schedule import DetectionSchedule, DetectionScheduleConfig
 from lili_odom.pipeline.detection_worker import PENDING, DetectionWorker
@@ -249,6 +250,8 @@ class OdometryPipeline:
         self._late_before = False  # the last background result was late when due
         self._pending_late = False  # the one in flight was
         self._detection_seq = 0
+        #: this scan's screen: point-to-plane information (scaled, 6x6) and its length [m]
+        self._screen_information: tuple[np.ndarray, float] | None = None
         self._matcher = ScanMatcher(self.config.scan_matcher)
         self._start_sweeps = StartSweeps()
         self._first_sweep: StartSweep | None = None  # a new start's first sweep, raw
@@ -425,6 +428,7 @@ class OdometryPipeline:
             warnings.append(f"registration failed: {reg.reason}")
 
         degeneracy = None
+        self._screen_information = None
         t0 = time.perf_counter()
         wheels_recent = self._wheels_recent(t_ref)  # else there is no wheel data for this scan
         planes = PlaneFitCache(map_points, self._matcher.reference,
@@ -506,7 +510,8 @@ class OdometryPipeline:
             fused = est.last_output
         else:
             T_icp_base = measured @ np.linalg.inv(T_bl) if reg.ok else None
-            fused = est.update(t_ref, T_icp_base, degeneracy, subspace=subspace)
+            fused = est.update(t_ref, T_icp_base, degeneracy, subspace=subspace,
+                               lidar_information=self._registration_information())
         timings["fusion"] = time.perf_counter() - t0
         if fused is None:
             self._skip("fusion_rejected", "the estimator rejected the update at %.3f (%s)", t_ref,
@@ -722,12 +727,22 @@ class OdometryPipeline:
                                   replace(cfg, iterations=0), fits=planes.probe(pose))
         if not (full.ok and np.all(np.isfinite(full.information))):
             return None
+        self._screen_information = (full.information, length)
         weakest = float(np.linalg.eigvalsh(full.information)[0])
         if weakest < cfg.clear_information:
             return None
         return DegeneracyResult(method=self._detector.name, pose=np.asarray(pose, dtype=float),
                                 basis_scaled=np.zeros((0, 6)), characteristic_length=length,
                                 details={"screened": True, "min_information": weakest})
+
+    def _registration_information(self) -> np.ndarray | None:
+        """The registration's ``(v, w)`` information for the fusion from this scan's screen
+        (``plane_refinement.weigh_registration``), or None (the configured sigmas)."""
+        if not (self.config.plane_refinement.weigh_registration
+                and self._screen_information is not None):
+            return None
+        planes, length = self._screen_information
+        return registration_information(self.config.fusion.lidar.information(), planes, length)
 
     def _submit(self, seq: int, source: np.ndarray, guess: np.ndarray,
                 pose: np.ndarray) -> None:

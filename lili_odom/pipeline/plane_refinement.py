@@ -131,6 +131,12 @@ class PlaneRefinementConfig:
             use anyway): such a scan counts as constrained, since every direction a detection
             could flag there would be cleared again. Default True; False runs the detector
             (or carries a detection over) on every scan.
+        weigh_registration: the fusion weighs a scan's registration by the screen's
+            point-to-plane information too, on scans where the screen ran: the covariance
+            of the configured LiDAR sigmas (``fusion.lidar``) plus the planes'
+            (:func:`lili_odom.fusion.measurements.registration_information`), so a scan its
+            planes hold weakly counts for less against the IMU. False: the configured
+            sigmas alone. Default False.
         predicted_start: without wheel data, the refinement inside the subspace is also run
             from the fused prediction's components there and kept when it fits the planes
             better and they hold every direction of the subspace to
@@ -228,6 +234,7 @@ class PlaneRefinementConfig:
     refine_constrained: str = "planar"
     constrained_information: float = 1000.0
     screen_detections: bool = True
+    weigh_registration: bool = False
     predicted_start: bool = True
     return_check: str = "prediction"
     return_check_window_s: float = 30.0
