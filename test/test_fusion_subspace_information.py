@@ -111,3 +111,27 @@ def test_a_looser_limit_until_the_wheel_scale_is_established():
     assert start.wheel_scale.scale == pytest.approx(1.03, rel=0.01)
     # once established the 3 cm limit applies again: the rest of the 20 m is not chained
     assert start.wheel_scale.lidar_m < 15.0
+
+
+def test_registration_information_adds_the_planes_covariance_to_the_configured_one():
+    """Planes far stronger than the configured sigmas leave those; a direction the planes
+    hold weakly takes about the planes' own weight; one they do not hold keeps at most
+    ``1 / MAX_PLANE_SIGMA^2``. The planes' scaled rotations are converted with the length."""
+    from lili_odom.fusion.measurements import MAX_PLANE_SIGMA, registration_information
+
+    configured = FusionConfig().lidar.information()
+    length = 10.0
+    strong = registration_information(configured, 1e9 * np.eye(6), length)
+    np.testing.assert_allclose(strong, configured, rtol=1e-3)
+    planes = np.diag([1e9, 400.0, 0.0, 1e9, 1e9, 1e9])  # y: a 5 cm sigma; z: nothing
+    info = registration_information(configured, planes, length)
+    np.testing.assert_allclose(info, info.T)
+    sigma_y = np.sqrt(1.0 / configured[1, 1] + 1.0 / 400.0)
+    assert info[1, 1] == pytest.approx(sigma_y**-2, rel=1e-6)
+    assert info[2, 2] <= MAX_PLANE_SIGMA**-2
+    assert info[2, 2] == pytest.approx(1.0 / (1.0 / configured[2, 2] + MAX_PLANE_SIGMA**2))
+    # a rotation the planes hold with 400 [1/m^2] over L w: (0.05 / L) rad
+    weak_roll = registration_information(configured, np.diag([1e9] * 3 + [400.0] + [1e9] * 2),
+                                         length)
+    sigma_roll = np.sqrt(1.0 / configured[3, 3] + (0.05 / length) ** 2)
+    assert weak_roll[3, 3] == pytest.approx(sigma_roll**-2, rel=1e-6)

@@ -239,6 +239,27 @@ def test_a_scan_its_planes_hold_in_every_direction_skips_the_detector():
     assert off._screen(scan, here, planes(off, scan)) is None
 
 
+def test_the_screen_weighs_the_registration_for_the_fusion():
+    """With ``weigh_registration`` the fusion gets the screen's information combined with
+    the configured sigmas; without it (or before a screen) the configured sigmas."""
+    from lili_odom.fusion.measurements import registration_information
+
+    room = corridor(12.0, end_walls=True)
+    pipeline = _pipeline_over(room, 5.9)
+    pipeline._detector = _NoDetector()
+    here, scan = pose_at(6.0), scan_at(room, 6.0)
+    assert pipeline._registration_information() is None
+    pipeline._detection(scan, here, here, planes(pipeline, scan))
+    assert pipeline._registration_information() is None  # off by default
+    pipeline.config.plane_refinement.weigh_registration = True
+    info = pipeline._registration_information()
+    planes_info, length = pipeline._screen_information
+    configured = pipeline.config.fusion.lidar.information()
+    np.testing.assert_allclose(info, registration_information(configured, planes_info, length))
+    assert np.all(np.linalg.eigvalsh(configured - info) >= -1e-6)  # never above the sigmas
+    assert np.linalg.eigvalsh(planes_info)[0] > 0
+
+
 def test_a_screened_scan_passes_the_weak_check_without_computing_it_again(monkeypatch):
     from dataclasses import replace
 

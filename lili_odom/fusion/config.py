@@ -189,6 +189,12 @@ class FusionConfig:
         gravity_variable_sigma: prior standard deviation of that tilt about x and y [rad]
             (an accelerometer bias ``b`` taken for gravity at the start tilts the frame by
             about ``b / g``; default 0.01, about ``imu.accel_bias_prior_sigma / g``).
+        cruise_sigma: on an interval without wheel data whose registration leaves a
+            degenerate direction, a robust factor (``lidar.robust_kernel``) holds the
+            velocity (odometry frame) constant with this standard deviation of the
+            acceleration [m/s^2] times the interval: along a direction nothing else measures,
+            a robot that cruises tells the accelerometer's bias from its motion, as a
+            LiDAR-only constant-velocity model does. 0 (default) = no such factor.
         wheel_scale: online calibration of the wheel distance scale
             (:mod:`lili_odom.fusion.wheel_scale`).
         wheel_weak_scale: factor on the wheel information outside the degenerate subspace
@@ -242,6 +248,7 @@ class FusionConfig:
     gravity_tracking_gate: float = 0.05
     gravity_variable: bool = True
     gravity_variable_sigma: float = 0.01
+    cruise_sigma: float = 0.0
     wheel_weak_scale: float = 0.0
     wheel_restriction: str = "weighted"
     no_imu_sigma_translation_per_s: float = 1.0
@@ -286,6 +293,7 @@ class FusionConfig:
                     lo_open=True, unit="rad")
         check_range(prefix + "gravity_variable_sigma", self.gravity_variable_sigma, 0.0, 0.5,
                     lo_open=True, unit="rad")
+        check_range(prefix + "cruise_sigma", self.cruise_sigma, 0.0, 1e3, unit="m/s^2")
         check_range(prefix + "wheel_weak_scale", self.wheel_weak_scale, 0.0, 1.0)
         if self.wheel_restriction not in WHEEL_RESTRICTIONS:
             raise ValueError(f"{prefix}wheel_restriction must be one of "

@@ -98,6 +98,7 @@ from gtsam.symbol_shorthand import B, V, X
 from lili_odom.fusion.config import FusionConfig
 from lili_odom.fusion.factors import (
     absolute_factor,
+    add_cruise_factor,
     add_lidar_factors,
     add_motion_model_factors,
     add_subspace_factor,
@@ -614,6 +615,11 @@ class FusionEstimator:
             used_wheel = split.wheel is not None and wheel.corrected is not None
             if used_wheel:
                 add_wheel_factor(graph, i, wheel.corrected, split.wheel)
+            if (used_imu and cfg.cruise_sigma > 0.0 and wheel.corrected is None
+                    and split.dimension):
+                add_cruise_factor(graph, i, cfg.cruise_sigma * (t - prev.t),
+                                  robust_kernel(cfg.lidar.robust_kernel,
+                                                cfg.lidar.robust_threshold))
 
             values.insert(X(i), pose_guess)
             values.insert(V(i), np.asarray(vel_guess, dtype=float))

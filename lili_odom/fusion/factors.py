@@ -31,8 +31,8 @@ from lili_odom.fusion.config import FusionConfig
 from lili_odom.fusion.subspace import restrict_information, sqrt_information
 from lili_odom.geometry import orthonormalize
 
-__all__ = ["absolute_factor", "add_lidar_factors", "add_motion_model_factors",
-           "add_subspace_factor", "add_wheel_factor", "from_gtsam_matrix",
+__all__ = ["absolute_factor", "add_cruise_factor", "add_lidar_factors",
+           "add_motion_model_factors", "add_subspace_factor", "add_wheel_factor", "from_gtsam_matrix",
            "noise_from_information", "robust_kernel", "to_gtsam_matrix"]
 
 # base_link roll and pitch (rows of the (v, w) identity) and the other four directions
@@ -128,6 +128,14 @@ def add_wheel_factor(graph: gtsam.NonlinearFactorGraph, i: int, delta: np.ndarra
     """A ``BetweenFactorPose3`` ``X(i-1) -> X(i)`` at the wheel increment ``delta`` (4x4)."""
     graph.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(delta),
                                        noise_from_information(information)))
+
+
+def add_cruise_factor(graph: gtsam.NonlinearFactorGraph, i: int, sigma: float,
+                      kernel: Any) -> None:
+    """A factor holding the velocity constant from ``V(i-1)`` to ``V(i)`` (odometry frame)
+    with standard deviation ``sigma`` [m/s] per axis; ``kernel``: M-estimator or None."""
+    noise = _robust(gtsam.noiseModel.Isotropic.Sigma(3, max(sigma, 1e-9)), kernel)
+    graph.add(gtsam.BetweenFactorPoint3(V(i - 1), V(i), np.zeros(3), noise))
 
 
 def add_motion_model_factors(graph: gtsam.NonlinearFactorGraph, i: int, motion: np.ndarray,
