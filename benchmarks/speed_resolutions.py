@@ -22,6 +22,11 @@ from round to round, over ``--repeats`` rounds:
   (reading and decoding the bag, parsing the clouds, ``KissICP.register_frame`` with KISS-ICP's
   default configuration, the poses into base_link).
 
+* ``none`` (with ``--with-none``, after the two): the same offline run with
+  ``pipeline.method`` none, no degeneracy detection and nothing built on it (no plane fits):
+  the floor of our pipeline (deskew, registration, fusion, inputs and outputs) against which
+  ``lili``'s own share shows.
+
 Timed is that one call; not timed are the interpreter's start-up and the imports (the modules
 the call uses are imported first; the modules still imported inside the timing are counted).
 
@@ -58,6 +63,8 @@ from benchmarks.speed import (LoadMeter, _cpu_busy_jiffies, _fmt, _other_load, _
 from lili_odom.evaluation.timing import median_run
 
 METHODS = ("lili", "kiss")
+#: The optional floor: our pipeline without degeneracy detection (``--with-none``).
+FLOOR = "none"
 TARGET_RATIO = 1.5
 #: Stages of the pipeline in the order of its per-scan work (metrics.json ``timings_mean_s``).
 STAGE_ORDER = ("predict", "deskew", "icp", "detector", "refine", "remap", "fusion", "map",
@@ -80,6 +87,7 @@ IMPORTS = {
     "kiss": _BAG_IMPORTS + ("lili_odom.suite.peers.kiss", "lili_odom.suite.peers.inputs",
                             "lili_odom.suite.frames", "kiss_icp.kiss_icp", "kiss_icp.config"),
 }
+IMPORTS[FLOOR] = IMPORTS["lili"]
 
 
 # ----------------------------------------------------------------------------- one timed run
@@ -95,14 +103,15 @@ def _preimport(method: str) -> None:
             pass
 
 
-def run_lili(bag: Path | str) -> dict[str, Any]:
-    """``run_bag`` over ``bag`` with the defaults and method ``lili``, in this process; the
-    outputs go to a temporary directory (removed after the timing)."""
+def run_lili(bag: Path | str, method: str = "lili") -> dict[str, Any]:
+    """``run_bag`` over ``bag`` with the defaults and ``pipeline.method`` ``method`` (lili or
+    none), in this process; the outputs go to a temporary directory (removed after the
+    timing)."""
     from lili_odom.config import load_config
     from lili_odom.evaluation.runner import run_bag
 
     config = load_config(None)
-    config.pipeline.method = "lili"
+    config.pipeline.method = method
     config.validate()
     with tempfile.TemporaryDirectory(prefix="lili_speed_res_") as tmp:
         modules0, rss0 = set(sys.modules), _rss_mb()
@@ -114,7 +123,7 @@ def run_lili(bag: Path | str) -> dict[str, Any]:
         imported = sorted(set(sys.modules) - modules0)
         summary = json.loads((Path(tmp) / "run" / "metrics.json").read_text())
     metrics = summary.get("metrics") or {}
-    return {"method": "lili", "scans": len(run.estimates), "wall_s": wall,
+    return {"method": method, "scans": len(run.estimates), "wall_s": wall,
             "scans_per_s": len(run.estimates) / wall if wall > 0 else float("nan"),
             "run_bag_loop_s": summary["wall_time_s"],
             "stages_mean_ms": {k: 1e3 * v for k, v in summary["timings_mean_s"].items()},
@@ -189,21 +198,35 @@ def summarise(runs: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
     out["lili"]["ate_m"] = median_lili.get("ate_m")
     out["ratio"] = ratio
     out["rounds_ratio"] = per_round
+    if runs.get(FLOOR):
+        rs = runs[FLOOR]
+        wall = float(np.median([r["wall_s"] for r in rs]))
+        floor_kiss = [a["wall_s"] / b["wall_s"] for a, b in zip(rs, runs["kiss"])]
+        lili_floor = [a["wall_s"] / b["wall_s"] for a, b in zip(runs["lili"], rs)]
+        median_floor = median_run(rs, key="wall_s")
+        out[FLOOR] = {"scans": rs[0]["scans"], "wall_s": wall,
+                      "scans_per_s": rs[0]["scans"] / wall if wall > 0 else float("nan"),
+                      "rounds_wall_s": [r["wall_s"] for r in rs],
+                      "rss_peak_mb": max(r["rss_peak_mb"] for r in rs),
+                      "ratio_kiss": float(np.median(floor_kiss)), "rounds_ratio_kiss": floor_kiss,
+                      "lili_ratio": float(np.median(lili_floor)), "rounds_lili_ratio": lili_floor,
+                      "stages_mean_ms": median_floor["stages_mean_ms"]}
     out["target"] = {"value": ratio, "target": TARGET_RATIO, "met": ratio <= TARGET_RATIO}
     return out
 
 
-def benchmark(bags: dict[str, Path], kind: str, repeats: int = 2, progress: bool = True
-              ) -> dict[str, Any]:
+def benchmark(bags: dict[str, Path], kind: str, repeats: int = 2, progress: bool = True,
+              with_none: bool = False) -> dict[str, Any]:
     """Every method on every bag (``{"ROWSxCOLS": bag}``) ``repeats`` rounds, each run in a
-    fresh process; the JSON-ready per-resolution results and the load."""
+    fresh process (``none`` after the two with ``with_none``); the JSON-ready
+    per-resolution results and the load."""
     meter = LoadMeter()
     rows: dict[str, Any] = {}
     for res, bag in bags.items():
         warm_file_cache(bag)
-        runs: dict[str, list[dict]] = {m: [] for m in METHODS}
+        runs: dict[str, list[dict]] = {m: [] for m in METHODS + ((FLOOR,) if with_none else ())}
         for r in range(repeats):
-            for method in round_order(r):
+            for method in round_order(r) + ((FLOOR,) if with_none else ()):
                 tag = f"[{res}] round {r + 1}/{repeats} {method}"
                 if progress:
                     print(f"{tag} ...", flush=True)
@@ -279,6 +302,24 @@ def markdown(report: dict[str, Any], command: str) -> str:
     lines += ["", f"Target (`lili` at most {report['target_ratio']:g}x KISS-ICP's wall time): "
               + (f"met at {', '.join(met)}" if met else "met at no resolution")
               + (f"; missed at {', '.join(missed)}" if missed else "") + "."]
+    floors = {res: row[FLOOR] for res, row in report["resolutions"].items() if FLOOR in row}
+    if floors:
+        lines += ["", "## The floor: our pipeline without degeneracy detection", "",
+                  "`none`: the same run with `pipeline.method` none (no detection, no plane "
+                  "fits, nothing built on them), after the two in each round. none / KISS and "
+                  "lili / none: wall time ratios within each round (in brackets), and their "
+                  "median; `none` total: its pipeline's own mean time per scan [ms].", "",
+                  "| resolution | `none` wall [s] | `none` scans/s | none / KISS (rounds) | "
+                  "lili / none (rounds) | `none` total [ms] | `none` peak RSS [MB] |",
+                  "|---|---:|---:|---:|---:|---:|---:|"]
+        for res, fl in floors.items():
+            lines.append(
+                f"| {res} | {_fmt(fl['wall_s'])} | {_fmt(fl['scans_per_s'])} | "
+                f"{_fmt(fl['ratio_kiss'], 2)} ("
+                + ", ".join(_fmt(x, 2) for x in fl["rounds_ratio_kiss"]) + ") | "
+                f"{_fmt(fl['lili_ratio'], 2)} ("
+                + ", ".join(_fmt(x, 2) for x in fl["rounds_lili_ratio"]) + ") | "
+                f"{_fmt(fl['stages_mean_ms'].get('total'))} | {_fmt(fl['rss_peak_mb'], 0)} |")
     stages = [k for k in STAGE_ORDER
               if any(k in row["lili"]["stages_mean_ms"] for row in report["resolutions"].values())]
     extra = sorted({k for row in report["resolutions"].values()
@@ -312,21 +353,24 @@ def main(argv=None) -> int:
     ap.add_argument("--name", default="speed_resolutions",
                     help="file name of the results without .md/.json (default speed_resolutions)")
     ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--with-none", action="store_true",
+                    help="also time the pipeline without degeneracy detection (method none)")
     ap.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
     ap.add_argument("--bag", type=Path, help=argparse.SUPPRESS)
-    ap.add_argument("--method", choices=METHODS, help=argparse.SUPPRESS)
+    ap.add_argument("--method", choices=METHODS + (FLOOR,), help=argparse.SUPPRESS)
     ap.add_argument("--kind", default="", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker is not None:  # one timed run in this (fresh) process
         _preimport(args.method)
-        r = run_lili(args.bag) if args.method == "lili" else run_kiss(args.bag, args.kind)
+        r = (run_kiss(args.bag, args.kind) if args.method == "kiss"
+             else run_lili(args.bag, args.method))
         args.worker.write_text(json.dumps(r))
         return 0
     if args.repeats < 1:
         ap.error("--repeats must be at least 1")
     scenario, bags = piece_bags(ap, args, progress=not args.no_progress)
     report = benchmark(bags, scenario.kind, repeats=args.repeats,
-                       progress=not args.no_progress)
+                       progress=not args.no_progress, with_none=args.with_none)
     report["piece"] = {"scenario": scenario.name, "kind": scenario.kind,
                        "start_s": args.start, "duration_s": args.duration, "seed": args.seed}
     report["suite_resolutions"] = {format_resolution(r): names
@@ -334,7 +378,8 @@ def main(argv=None) -> int:
     command = piece_command(
         "benchmarks.speed_resolutions", args,
         (f" --repeats {args.repeats}" if args.repeats != 2 else "")
-        + (f" --name {args.name}" if args.name != "speed_resolutions" else ""))
+        + (f" --name {args.name}" if args.name != "speed_resolutions" else "")
+        + (" --with-none" if args.with_none else ""))
     path = write_results(args.out, args.name, markdown(report, command), report)
     print(f"wrote {path}")
     return 0

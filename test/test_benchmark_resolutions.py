@@ -82,6 +82,28 @@ def test_summary_takes_the_ratio_within_each_round_and_its_median():
     assert fast["target"]["met"] and fast["rounds_ratio"] == pytest.approx([1.4])
 
 
+def test_the_floor_is_reported_against_kiss_and_lili_within_each_round():
+    runs = {"lili": [_lili(20.0), _lili(24.0)], "kiss": [_kiss(10.0), _kiss(20.0)],
+            "none": [{**_lili(15.0, total_ms=30.0), "method": "none"},
+                     {**_lili(16.0, total_ms=32.0), "method": "none"}]}
+    s = sr.summarise(runs)
+    floor = s["none"]
+    assert floor["rounds_ratio_kiss"] == pytest.approx([1.5, 0.8])
+    assert floor["ratio_kiss"] == pytest.approx(1.15)
+    assert floor["rounds_lili_ratio"] == pytest.approx([20 / 15, 24 / 16])
+    assert floor["wall_s"] == pytest.approx(15.5)
+    assert s["ratio"] == pytest.approx(1.6)  # lili / KISS as without the floor
+    report = {"machine": MACHINE, "load": LOAD, "piece": PIECE, "repeats": 2,
+              "target_ratio": 1.5, "resolutions": {"32x512": {"bag": "b", **s, "runs": runs}},
+              "suite_resolutions": {}}
+    md = sr.markdown(report, "python -m benchmarks.speed_resolutions --with-none")
+    row = next(line for line in md.splitlines() if line.startswith("| 32x512 | 15.5"))
+    assert "1.15 (1.50, 0.80)" in row and "1.42 (1.33, 1.50)" in row
+    assert "floor" not in sr.markdown({**report, "resolutions": {
+        "32x512": {"bag": "b", **sr.summarise({k: runs[k] for k in ("lili", "kiss")}),
+                   "runs": runs}}}, "cmd")
+
+
 def test_speed_report_has_a_row_and_a_verdict_per_resolution():
     rows = {"32x512": {"bag": "b1", **sr.summarise({"lili": [_lili(14.0)], "kiss": [_kiss(10.0)]}),
                        "runs": {"lili": [_lili(14.0)], "kiss": [_kiss(10.0)]}},
