@@ -46,3 +46,25 @@ def test_a_failed_run_is_shown_and_not_averaged():
     text = tuning.report(results, {}, "lili", "cmd")
     assert "– (a run failed)" in text
     assert math.isnan(tuning._cell({"error": "x"})[0])
+
+
+def test_repeats_report_the_median_and_the_range_and_average_the_medians():
+    results = {
+        "default": [_doc([_row("a", "lili", x)]) for x in (0.2, 0.6, 0.3)],
+        "other": [_doc([_row("a", "lili", x)]) for x in (0.25, 0.25, 0.9)],
+    }
+    text = tuning.report(results, {}, "lili", "cmd")
+    line = next(l for l in text.splitlines() if l.startswith("| a |"))
+    assert "**0.250 (0.25 %)** [0.250-0.900]" in line
+    assert "0.300 (0.30 %) [0.200-0.600]" in line
+    means = next(l for l in text.splitlines() if l.startswith("| **mean"))
+    assert "0.30 %" in means and "0.25 %" in means
+    assert "3 runs per configuration" in text
+    failed = {"default": [_doc([_row("a", "lili", 0.2)]), _doc([_row("a", "lili", None,
+                                                                   error="x")])]}
+    assert "– (a run failed)" in tuning.report(failed, {}, "lili", "cmd")
+
+
+def test_repeats_must_be_positive(tmp_path):
+    with pytest.raises(SystemExit, match="--repeats must be at least 1"):
+        tuning.main(["--repeats", "0", "--out", str(tmp_path)])
