@@ -692,3 +692,26 @@ def test_cruise_factor_only_without_wheel_data() -> None:
     on = _cruise_along_a_degenerate_axis(0.1, wheels=True)
     np.testing.assert_allclose(on.pose, off.pose, atol=1e-9)
     np.testing.assert_allclose(on.velocity, off.velocity, atol=1e-9)
+
+
+def test_cruise_factor_leaves_a_start_to_the_imu() -> None:
+    """Accelerating at 0.5 m/s^2 from rest along a degenerate axis without wheels, with an
+    unbiased IMU: the start is beyond ``cruise_max_accel``, so the factor does not hold the
+    velocity at rest: the estimate is the one without the factor (without the gate the
+    start would be taken for an accelerometer bias and the robot held at rest)."""
+    def run(sigma: float, max_accel: float) -> FusionOutput:
+        est = FusionEstimator(config(gravity_align=False, cruise_sigma=sigma,
+                                     cruise_max_accel=max_accel))
+        feed_imu(est, -1.0, 4.05, (0.5, 0.0, G))
+        est.initialize(0.0)
+        out = None
+        for k in range(1, 41):
+            out = est.update(0.1 * k, pose(), degeneracy([1, 0, 0, 0, 0, 0]))
+        return out
+
+    free, gated, held = run(0.0, 0.1), run(0.1, 0.1), run(0.1, 1e3)
+    assert free.velocity[0] > 1.8, free.velocity
+    np.testing.assert_allclose(gated.velocity, free.velocity, atol=1e-9)
+    np.testing.assert_allclose(gated.pose, free.pose, atol=1e-9)
+    assert held.velocity[0] < 0.5 and held.accel_bias[0] > 0.2, (held.velocity,
+                                                                 held.accel_bias)

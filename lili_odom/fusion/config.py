@@ -195,6 +195,10 @@ class FusionConfig:
             acceleration [m/s^2] times the interval: along a direction nothing else measures,
             a robot that cruises tells the accelerometer's bias from its motion, as a
             LiDAR-only constant-velocity model does. 0 (default) = no such factor.
+        cruise_max_accel: the cruise factor applies only where the IMU's own prediction
+            accelerates by at most this over the interval [m/s^2] (mean, bias-corrected,
+            gravity removed): starting, stopping and turning are left to the IMU. Default
+            0.1.
         wheel_scale: online calibration of the wheel distance scale
             (:mod:`lili_odom.fusion.wheel_scale`).
         wheel_weak_scale: factor on the wheel information outside the degenerate subspace
@@ -249,6 +253,7 @@ class FusionConfig:
     gravity_variable: bool = True
     gravity_variable_sigma: float = 0.01
     cruise_sigma: float = 0.0
+    cruise_max_accel: float = 0.1
     wheel_weak_scale: float = 0.0
     wheel_restriction: str = "weighted"
     no_imu_sigma_translation_per_s: float = 1.0
@@ -294,6 +299,8 @@ class FusionConfig:
         check_range(prefix + "gravity_variable_sigma", self.gravity_variable_sigma, 0.0, 0.5,
                     lo_open=True, unit="rad")
         check_range(prefix + "cruise_sigma", self.cruise_sigma, 0.0, 1e3, unit="m/s^2")
+        check_range(prefix + "cruise_max_accel", self.cruise_max_accel, 0.0, 1e3,
+                    lo_open=True, unit="m/s^2")
         check_range(prefix + "wheel_weak_scale", self.wheel_weak_scale, 0.0, 1.0)
         if self.wheel_restriction not in WHEEL_RESTRICTIONS:
             raise ValueError(f"{prefix}wheel_restriction must be one of "

@@ -615,8 +615,8 @@ class FusionEstimator:
             used_wheel = split.wheel is not None and wheel.corrected is not None
             if used_wheel:
                 add_wheel_factor(graph, i, wheel.corrected, split.wheel)
-            if (used_imu and cfg.cruise_sigma > 0.0 and wheel.corrected is None
-                    and split.dimension):
+            if used_imu and wheel.corrected is None and split.dimension and self._cruising(
+                    prev, t, vel_guess):
                 add_cruise_factor(graph, i, cfg.cruise_sigma * (t - prev.t),
                                   robust_kernel(cfg.lidar.robust_kernel,
                                                 cfg.lidar.robust_threshold))
@@ -640,6 +640,14 @@ class FusionEstimator:
             self._recover(prev)
             notes = notes + ["IMU factor made the update unsolvable; retried without it"]
         return out
+
+    def _cruising(self, prev: _State, t: float, velocity: np.ndarray) -> bool:
+        """True when the cruise factor applies from ``prev`` to ``t``: on
+        (``cruise_sigma``) and the IMU's prediction ``velocity`` [m/s, graph frame] differs
+        from ``prev``'s by at most ``cruise_max_accel`` over the interval."""
+        cfg = self.config
+        change = float(np.linalg.norm(np.asarray(velocity, dtype=float) - prev.graph_velocity))
+        return cfg.cruise_sigma > 0.0 and change <= cfg.cruise_max_accel * (t - prev.t)
 
     def _motion_factors(self, graph: gtsam.NonlinearFactorGraph, prev: _State, t: float,
                         allow_imu: bool, lidar: LidarMeasurement, wheel: WheelIncrement,
