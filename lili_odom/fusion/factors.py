@@ -32,8 +32,8 @@ from lili_odom.fusion.subspace import restrict_information, sqrt_information
 from lili_odom.geometry import orthonormalize
 
 __all__ = ["absolute_factor", "add_cruise_factor", "add_lidar_factors",
-           "add_motion_model_factors", "add_subspace_factor", "add_wheel_factor", "from_gtsam_matrix",
-           "noise_from_information", "robust_kernel", "to_gtsam_matrix"]
+           "add_motion_model_factors", "add_subspace_factor", "add_wheel_factor",
+           "from_gtsam_matrix", "noise_from_information", "robust_kernel", "to_gtsam_matrix"]
 
 # base_link roll and pitch (rows of the (v, w) identity) and the other four directions
 TILT = np.eye(6)[[3, 4]]
