@@ -194,7 +194,7 @@ class FusionConfig:
             velocity (odometry frame) constant with this standard deviation of the
             acceleration [m/s^2] times the interval: along a direction nothing else measures,
             a robot that cruises tells the accelerometer's bias from its motion, as a
-            LiDAR-only constant-velocity model does. 0 (default) = no such factor.
+            LiDAR-only constant-velocity model does. Default 0.1; 0 = no such factor.
         cruise_max_accel: the cruise factor applies only where the IMU's own prediction
             accelerates by at most this over the interval [m/s^2] (mean, bias-corrected,
             gravity removed): starting, stopping and turning are left to the IMU. Default
@@ -252,7 +252,7 @@ class FusionConfig:
     gravity_tracking_gate: float = 0.05
     gravity_variable: bool = True
     gravity_variable_sigma: float = 0.01
-    cruise_sigma: float = 0.0
+    cruise_sigma: float = 0.1
     cruise_max_accel: float = 0.1
     wheel_weak_scale: float = 0.0
     wheel_restriction: str = "weighted"
