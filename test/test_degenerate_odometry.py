@@ -82,10 +82,10 @@ def test_without_wheel_data_the_subspace_information_takes_its_factor(featureles
         seen = []
         update = FusionEstimator.update
 
-        def recording(self, t, T_icp_base, degeneracy, subspace=None):
+        def recording(self, t, T_icp_base, degeneracy, subspace=None, **kwargs):
             if subspace is not None and np.abs(subspace.information_scaled).max() > 0:
                 seen.append(np.array(subspace.information_scaled))  # the runs part after it
-            return update(self, t, T_icp_base, degeneracy, subspace=subspace)
+            return update(self, t, T_icp_base, degeneracy, subspace=subspace, **kwargs)
 
         monkeypatch.setattr(FusionEstimator, "update", recording)
         _replay_first_scans(featureless_bag, config, wheels)
