@@ -13,9 +13,8 @@ Writes ``OUT/tuning.md`` (ATE per scenario and configuration, in metres and in %
 distance, best per row in bold, the mean of the % over the rows) and ``OUT/tuning.json``; each
 configuration's suite report is in ``OUT/<config>/`` (with ``--repeats`` N > 1 in
 ``OUT/<config>/r<k>/``). The registration's parallel reductions make two runs of one bag
-differ, by centimetres on most runs and up to 2x where the estimate rests on the IMU; with
-repeats each cell is the median over them with their range, and the mean of the % is taken
-over the medians.
+differ (``config/deterministic.yaml``); with repeats each cell is the median over them with
+their range, and the mean of the % is taken over the medians.
 """
 from __future__ import annotations
 
