@@ -24,7 +24,7 @@ from lili_odom.fusion.config import FusionConfig
 from lili_odom.fusion.subspace import snap_basis
 from lili_odom.fusion.wheel import WheelBuffer, wheel_information
 from lili_odom.fusion.wheel_scale import WheelScaleEstimator
-from lili_odom.geometry import orthonormalize
+from lili_odom.geometry import orthonormalize, scaling_matrix
 
 if TYPE_CHECKING:
     from lili_odom.fusion.estimator import FusionStats
@@ -108,8 +108,8 @@ def registration_information(configured: np.ndarray, planes: np.ndarray,
     """
     w, V = np.linalg.eigh(0.5 * (planes + planes.T))
     variances = 1.0 / np.maximum(w, MAX_PLANE_SIGMA**-2)
-    unscale = np.diag([1.0, 1.0, 1.0, 1.0 / length, 1.0 / length, 1.0 / length])
-    plane_cov = unscale @ (V * variances) @ V.T @ unscale  # scaled -> plain (v, w)
+    unscale = scaling_matrix(1.0 / length)  # scaled (v, L w) -> plain (v, w)
+    plane_cov = unscale @ (V * variances) @ V.T @ unscale
     cov = np.linalg.inv(configured) + plane_cov
     info = np.linalg.inv(cov)
     return 0.5 * (info + info.T)
