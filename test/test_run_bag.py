@@ -90,3 +90,21 @@ def test_a_wheel_topic_missing_from_the_bag_is_named_with_the_candidates(tmp_pat
     assert "IMU alone" in notes[0] and "/platform/odom (set wheel_topic)" in notes[0]
     assert "/ground_truth/odom" not in notes[0]
     assert not any("/ouster/imu" in r.getMessage() for r in caplog.records)
+
+
+def test_icp_quaternions_are_converted_in_one_call_with_nan_for_unusable_poses():
+    from scipy.spatial.transform import Rotation
+
+    from lili_odom.evaluation.runner import _quaternions
+
+    R = Rotation.from_euler("xyz", [0.1, -0.2, 0.3])
+    T = np.eye(4)
+    T[:3, :3] = R.as_matrix()
+    bad = T.copy()
+    bad[0, 0] = np.nan
+    q = _quaternions([T, None, bad, np.eye(3), np.eye(4)])
+    assert q.shape == (5, 4)
+    np.testing.assert_allclose(q[0], R.as_quat(), atol=1e-12)
+    assert np.isnan(q[1:4]).all()
+    np.testing.assert_allclose(q[4], [0, 0, 0, 1], atol=1e-12)
+    assert _quaternions([]).shape == (0, 4)

@@ -89,13 +89,18 @@ def _origin(det) -> tuple[int, int, int]:
     return int(d.get("weak", 0)), int(bool(d.get("reused"))), int(bool(d.get("screened")))
 
 
-def _quaternion(T: np.ndarray | None) -> list[float]:
-    """(qx, qy, qz, qw) of a 4x4 pose's rotation; NaN when it is missing or not finite."""
+def _quaternions(poses: list[np.ndarray | None]) -> np.ndarray:
+    """(n, 4) (qx, qy, qz, qw) of 4x4 poses' rotations, in one call; NaN rows for poses that
+    are missing or not finite."""
     from scipy.spatial.transform import Rotation
 
-    if T is None or np.shape(T) != (4, 4) or not np.isfinite(T).all():
-        return [float("nan")] * 4
-    return [float(q) for q in Rotation.from_matrix(np.asarray(T, dtype=float)[:3, :3]).as_quat()]
+    quats = np.full((len(poses), 4), np.nan)
+    good = [i for i, T in enumerate(poses)
+            if T is not None and np.shape(T) == (4, 4) and np.isfinite(T).all()]
+    if good:
+        rotations = np.array([np.asarray(poses[i], dtype=float)[:3, :3] for i in good])
+        quats[good] = Rotation.from_matrix(rotations).as_quat()
+    return quats
 
 
 def _vector(v: np.ndarray | None, n: int = 3) -> list[float]:
@@ -147,6 +152,7 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
         accumulator = MapAccumulator(map_voxel)
     last_accumulated = [-float("inf")]
     rows: list[list[float]] = []
+    icp_poses: list[np.ndarray | None] = []  # scans.csv's icp_q*, converted at the end
     replay = Replay(config)
     pipeline = replay.pipeline
     t_wall = time.perf_counter()
@@ -171,11 +177,11 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
             rows.append([out.stamp, dim, *out.pose[:3, 3],
                          *(out.timings.get(k, float("nan")) for k in STAGES),
                          out.details.get("wheel_scale", float("nan")),
-                         *_quaternion(out.icp_pose),
                          *_vector(out.details.get("accel_bias")),
                          *_vector(out.details.get("gyro_bias")),
                          *_vector(out.details.get("gravity_tilt"), 2),
                          *_origin(det), len(out.weak_basis)])
+            icp_poses.append(out.icp_pose)
             writer.write_output(out)
             if accumulator is not None and out.stamp - last_accumulated[0] >= 1.0:
                 accumulator.add(pipeline.local_map_points())
@@ -229,7 +235,9 @@ def run_bag(bag: Path | str, config: NodeConfig, out_dir: Path, *, max_scans: in
                     *(f"accel_bias_{a}" for a in "xyz"), *(f"gyro_bias_{a}" for a in "xyz"),
                     "gravity_tilt_x", "gravity_tilt_y", "weak_directions", "reused", "screened",
                     "weakly_held"])
-        w.writerows(rows)
+        quaternion_at = 6 + len(STAGES)  # after stamp, dimension, x, y, z, stages, scale
+        w.writerows(row[:quaternion_at] + [float(q) for q in quat] + row[quaternion_at:]
+                    for row, quat in zip(rows, _quaternions(icp_poses)))
     dims = np.asarray(run.dimensions)
     summary: dict = {
         "bag": str(bag),

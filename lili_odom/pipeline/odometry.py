@@ -542,8 +542,8 @@ class OdometryPipeline:
             if redo is not None:
                 self._rebuild_map(redo)
                 warnings.append("local map rebuilt from its first sweeps deskewed again")
-        if self.config.plane_refinement.enabled:  # the next scan's plane fits need the tree
-            self._matcher.reference.build_kdtree_ahead()
+        if self.config.plane_refinement.enabled and self._detector is not None:
+            self._matcher.reference.build_kdtree_ahead()  # the next scan's plane fits need it
         timings["map"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_start
 

@@ -145,8 +145,9 @@ class ScanMatcher:
             map_points = np.asarray(voxel_down_sample(frame, 0.5 * v))
         else:
             if len(times):
-                ends = np.setdiff1d([np.argmin(times), np.argmax(times)], keep)
-                keep = np.concatenate([keep, ends])
+                ends = [i for i in sorted({int(np.argmin(times)), int(np.argmax(times))})
+                        if not np.any(keep == i)]  # np.setdiff1d without sorting keep
+                keep = np.concatenate([keep, np.asarray(ends, dtype=keep.dtype)])
                 times = times[keep]
             map_points = np.asarray(self._preprocessor.preprocess(points[keep], times, motion))
         source = voxel_down_sample(map_points, 1.5 * v)
