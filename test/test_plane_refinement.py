@@ -408,6 +408,34 @@ def test_constrained_directions_are_refined_where_point_to_plane_holds_them():
         PlaneRefinementConfig(refine_constrained="yes").validate()
 
 
+def test_the_constrained_refinement_goes_on_from_where_a_round_ended_until_it_settles():
+    from lili_odom.degeneracy.result import DegeneracyResult
+
+    none = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0)
+    boxed = corridor(10.0, end_walls=True)
+    off_by = pose_at(5.0)
+    off_by[:3, 3] += [0.25, 0.0, 0.0]
+    ends = {}
+    for rounds in (1, 4):
+        pipeline = _pipeline_over(boxed, 4.9)
+        cfg = pipeline.config.plane_refinement
+        cfg.refine_constrained, cfg.constrained_rounds = "all", rounds
+        cfg.max_step = 0.04  # a round of three steps moves at most 12 cm
+        ends[rounds] = pipeline._refine_constrained(planes(pipeline, scan_at(boxed, 5.0)),
+                                                    off_by, none)
+        extra = pipeline.counters["constrained_rounds_extra"]
+        assert extra == rounds - 1 if rounds == 1 else 1 <= extra <= rounds - 1
+    assert ends[1][0, 3] - 5.0 > 0.1  # one round: still more than 10 cm off
+    np.testing.assert_allclose(ends[4][:3, 3], [5.0, 0.0, 1.5], atol=0.02)
+    # already where the planes hold it: one round, no more
+    pipeline = _pipeline_over(boxed, 4.9)
+    pipeline.config.plane_refinement.refine_constrained = "all"
+    pipeline._refine_constrained(planes(pipeline, scan_at(boxed, 5.0)), pose_at(5.0), none)
+    assert pipeline.counters["constrained_rounds_extra"] == 0
+    with pytest.raises(ValueError, match="constrained_rounds"):
+        PlaneRefinementConfig(constrained_rounds=0).validate()
+
+
 def test_only_directions_held_to_constrained_information_take_the_refined_step():
     from dataclasses import replace
 

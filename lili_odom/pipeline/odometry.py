@@ -1070,7 +1070,10 @@ class OdometryPipeline:
         The refinement runs in all those directions at once; its information at the result
         (where the residuals no longer carry the registration's offset) tells which of them
         are held that well, and only the step's part along those is kept (scaled twists);
-        along the others the registration stays.
+        along the others the registration stays. It runs in up to
+        ``plane_refinement.constrained_rounds`` rounds, each from where the last ended (on
+        planes found again there when it is out of their reach), until a round moves the
+        pose less than ``constrained_settle_m``.
         """
         cfg = self.config.plane_refinement
         if not cfg.enabled or cfg.refine_constrained == "off":
@@ -1078,7 +1081,21 @@ class OdometryPipeline:
         C = self._outside(degeneracy, planar=cfg.refine_constrained == "planar")
         if not len(C):
             return pose
-        length = degeneracy.characteristic_length
+        for round_ in range(cfg.constrained_rounds):
+            refined = self._constrained_round(planes, pose, C, degeneracy.characteristic_length)
+            moved = float(np.linalg.norm(refined[:3, 3] - pose[:3, 3]))
+            if round_:
+                self.counters["constrained_rounds_extra"] += 1
+            pose = refined
+            if moved < cfg.constrained_settle_m:
+                break
+        return pose
+
+    def _constrained_round(self, planes: PlaneFitCache, pose: np.ndarray, C: np.ndarray,
+                           length: float) -> np.ndarray:
+        """One round of :meth:`_refine_constrained` from ``pose`` in the directions ``C``
+        (orthonormal rows of scaled LiDAR twists, characteristic length ``length`` [m])."""
+        cfg = self.config.plane_refinement
         refined = refine_in_subspace(planes.points, planes.reference, pose, C, length, cfg,
                                      fits=planes.at(pose))
         if not refined.ok:

@@ -110,6 +110,15 @@ class PlaneRefinementConfig:
             degenerate subspace takes the point-to-plane refinement's step
             (``refine_constrained``); along the others the registration's pose stays.
             Default 1000 (a 3 cm sigma, as ``weak_information``).
+        constrained_rounds: rounds of the constrained refinement (``refine_constrained``),
+            each starting where the last one ended, on planes found again there once it is
+            more than 5 cm or 0.002 rad from where they were found; the rounds end early when
+            one moves the pose less than ``constrained_settle_m``. Default 4; 1 = one round on
+            the planes found at the registration. Where the registration sits centimetres
+            off (a young map's scan pattern holding it back while the robot accelerates), one
+            round on planes gated at that pose takes only part of the way back.
+        constrained_settle_m: translation [m] below which a round of the constrained
+            refinement ends the rounds; default 0.02.
         clear_information: a detected direction along which the refinement's information is
             at least this [1/m^2] is measured by the refined pose like a constrained one and
             removed from the degenerate subspace (default 1000: a 3 cm sigma, as
@@ -233,6 +242,8 @@ class PlaneRefinementConfig:
     information_without_wheels: float = 1.0
     refine_constrained: str = "planar"
     constrained_information: float = 1000.0
+    constrained_rounds: int = 4
+    constrained_settle_m: float = 0.02
     screen_detections: bool = True
     weigh_registration: bool = False
     predicted_start: bool = True
@@ -278,6 +289,9 @@ class PlaneRefinementConfig:
                     0.0, 1.0)
         check_range(prefix + "constrained_information", self.constrained_information, 0.0,
                     1e12, lo_open=True)
+        check_range(prefix + "constrained_rounds", self.constrained_rounds, 1, 100)
+        check_range(prefix + "constrained_settle_m", self.constrained_settle_m, 0.0, 10.0,
+                    unit="m")
         check_range(prefix + "return_check_window_s", self.return_check_window_s, 0.0, None,
                     unit="s")
         check_range(prefix + "return_offset", self.return_offset, 0.0, 10.0, lo_open=True,
