@@ -408,29 +408,36 @@ def test_constrained_directions_are_refined_where_point_to_plane_holds_them():
         PlaneRefinementConfig(refine_constrained="yes").validate()
 
 
-def test_the_constrained_refinement_goes_on_from_where_a_round_ended_until_it_settles():
+def test_on_a_screened_scan_the_constrained_refinement_goes_on_until_it_settles():
     from lili_odom.degeneracy.result import DegeneracyResult
 
-    none = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0)
+    screened = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0,
+                                details={"screened": True, "min_information": 2000.0})
+    detected = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0)
     boxed = corridor(10.0, end_walls=True)
     off_by = pose_at(5.0)
     off_by[:3, 3] += [0.25, 0.0, 0.0]
-    ends = {}
-    for rounds in (1, 4):
+
+    def refined(degeneracy, rounds):
         pipeline = _pipeline_over(boxed, 4.9)
         cfg = pipeline.config.plane_refinement
         cfg.refine_constrained, cfg.constrained_rounds = "all", rounds
         cfg.max_step = 0.04  # a round of three steps moves at most 12 cm
-        ends[rounds] = pipeline._refine_constrained(planes(pipeline, scan_at(boxed, 5.0)),
-                                                    off_by, none)
-        extra = pipeline.counters["constrained_rounds_extra"]
-        assert extra == rounds - 1 if rounds == 1 else 1 <= extra <= rounds - 1
-    assert ends[1][0, 3] - 5.0 > 0.1  # one round: still more than 10 cm off
-    np.testing.assert_allclose(ends[4][:3, 3], [5.0, 0.0, 1.5], atol=0.02)
+        pose = pipeline._refine_constrained(planes(pipeline, scan_at(boxed, 5.0)), off_by,
+                                            degeneracy)
+        return pose, pipeline.counters["constrained_rounds_extra"]
+
+    one, extra = refined(screened, 1)
+    assert one[0, 3] - 5.0 > 0.1 and extra == 0  # one round: still more than 10 cm off
+    rounds, extra = refined(screened, 4)
+    np.testing.assert_allclose(rounds[:3, 3], [5.0, 0.0, 1.5], atol=0.02)
+    assert 1 <= extra <= 3
+    # a detection's result (not a screen's) gets one round
+    np.testing.assert_allclose(refined(detected, 4)[0], one, atol=1e-9)
     # already where the planes hold it: one round, no more
     pipeline = _pipeline_over(boxed, 4.9)
     pipeline.config.plane_refinement.refine_constrained = "all"
-    pipeline._refine_constrained(planes(pipeline, scan_at(boxed, 5.0)), pose_at(5.0), none)
+    pipeline._refine_constrained(planes(pipeline, scan_at(boxed, 5.0)), pose_at(5.0), screened)
     assert pipeline.counters["constrained_rounds_extra"] == 0
     with pytest.raises(ValueError, match="constrained_rounds"):
         PlaneRefinementConfig(constrained_rounds=0).validate()

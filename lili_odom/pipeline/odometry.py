@@ -1070,10 +1070,10 @@ class OdometryPipeline:
         The refinement runs in all those directions at once; its information at the result
         (where the residuals no longer carry the registration's offset) tells which of them
         are held that well, and only the step's part along those is kept (scaled twists);
-        along the others the registration stays. It runs in up to
-        ``plane_refinement.constrained_rounds`` rounds, each from where the last ended (on
-        planes found again there when it is out of their reach), until a round moves the
-        pose less than ``constrained_settle_m``.
+        along the others the registration stays. On a scan the screen found held in every
+        direction it runs in up to ``plane_refinement.constrained_rounds`` rounds, each from
+        where the last ended (on planes found again there when it is out of their reach),
+        until a round moves the pose less than ``constrained_settle_m``; elsewhere in one.
         """
         cfg = self.config.plane_refinement
         if not cfg.enabled or cfg.refine_constrained == "off":
@@ -1081,7 +1081,8 @@ class OdometryPipeline:
         C = self._outside(degeneracy, planar=cfg.refine_constrained == "planar")
         if not len(C):
             return pose
-        for round_ in range(cfg.constrained_rounds):
+        rounds = cfg.constrained_rounds if _screened_here(degeneracy) else 1
+        for round_ in range(rounds):
             refined = self._constrained_round(planes, pose, C, degeneracy.characteristic_length)
             moved = float(np.linalg.norm(refined[:3, 3] - pose[:3, 3]))
             if round_:

@@ -110,13 +110,15 @@ class PlaneRefinementConfig:
             degenerate subspace takes the point-to-plane refinement's step
             (``refine_constrained``); along the others the registration's pose stays.
             Default 1000 (a 3 cm sigma, as ``weak_information``).
-        constrained_rounds: rounds of the constrained refinement (``refine_constrained``),
-            each starting where the last one ended, on planes found again there once it is
-            more than 5 cm or 0.002 rad from where they were found; the rounds end early when
-            one moves the pose less than ``constrained_settle_m``. Default 4; 1 = one round on
-            the planes found at the registration. Where the registration sits centimetres
-            off (a young map's scan pattern holding it back while the robot accelerates), one
-            round on planes gated at that pose takes only part of the way back.
+        constrained_rounds: rounds of the constrained refinement (``refine_constrained``)
+            on a scan the screen found held in every direction (``screen_detections``; other
+            scans get one), each starting where the last one ended, on planes found again
+            there once it is more than 5 cm or 0.002 rad from where they were found; the
+            rounds end early when one moves the pose less than ``constrained_settle_m``.
+            Default 4; 1 = one round on the planes found at the registration. Where the
+            registration sits centimetres off (a young map's scan pattern holding it back
+            while the robot accelerates), one round on planes gated at that pose takes only
+            part of the way back.
         constrained_settle_m: translation [m] below which a round of the constrained
             refinement ends the rounds; default 0.02.
         clear_information: a detected direction along which the refinement's information is
