@@ -425,13 +425,15 @@ def test_on_a_screened_scan_the_constrained_refinement_goes_on_until_it_settles(
         cfg.max_step = 0.04  # a round of three steps moves at most 12 cm
         pose = pipeline._refine_constrained(planes(pipeline, scan_at(boxed, 5.0)), off_by,
                                             degeneracy)
-        return pose, pipeline.counters["constrained_rounds_extra"]
+        return pose, pipeline.counters
 
-    one, extra = refined(screened, 1)
-    assert one[0, 3] - 5.0 > 0.1 and extra == 0  # one round: still more than 10 cm off
-    rounds, extra = refined(screened, 4)
+    one, counters = refined(screened, 1)
+    assert one[0, 3] - 5.0 > 0.1  # one round: still more than 10 cm off
+    assert counters["constrained_rounds_extra"] == 0 and counters["constrained_refined"] == 1
+    rounds, counters = refined(screened, 4)
     np.testing.assert_allclose(rounds[:3, 3], [5.0, 0.0, 1.5], atol=0.02)
-    assert 1 <= extra <= 3
+    assert 1 <= counters["constrained_rounds_extra"] <= 3
+    assert counters["constrained_refined"] == 1  # one scan refined, however many rounds
     # a detection's result (not a screen's) gets one round
     np.testing.assert_allclose(refined(detected, 4)[0], one, atol=1e-9)
     # already where the planes hold it: one round, no more

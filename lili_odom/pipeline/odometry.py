@@ -1082,14 +1082,18 @@ class OdometryPipeline:
         if not len(C):
             return pose
         rounds = cfg.constrained_rounds if _screened_here(degeneracy) else 1
+        stepped = False
         for round_ in range(rounds):
             refined = self._constrained_round(planes, pose, C, degeneracy.characteristic_length)
             moved = float(np.linalg.norm(refined[:3, 3] - pose[:3, 3]))
             if round_:
                 self.counters["constrained_rounds_extra"] += 1
+            stepped = stepped or refined is not pose
             pose = refined
             if moved < cfg.constrained_settle_m:
                 break
+        if stepped:  # scans, not rounds
+            self.counters["constrained_refined"] += 1
         return pose
 
     def _constrained_round(self, planes: PlaneFitCache, pose: np.ndarray, C: np.ndarray,
@@ -1105,7 +1109,6 @@ class OdometryPipeline:
         strong = w >= cfg.constrained_information
         if not strong.any():
             return pose
-        self.counters["constrained_refined"] += 1
         if strong.all():
             return refined.pose
         rows = V[:, strong].T @ refined.basis_scaled
