@@ -445,6 +445,39 @@ def test_on_a_screened_scan_the_constrained_refinement_goes_on_until_it_settles(
         PlaneRefinementConfig(constrained_rounds=0).validate()
 
 
+def test_a_screened_scan_is_also_refined_from_the_prediction_and_the_better_fit_kept():
+    from lili_odom.degeneracy.result import DegeneracyResult
+
+    screened = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0,
+                                details={"screened": True, "min_information": 2000.0})
+    detected = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0)
+    boxed = corridor(10.0, end_walls=True)
+    registration = pose_at(5.0)
+    registration[:3, 3] += [0.25, 0.0, 0.0]
+    prediction = pose_at(5.0)
+    prediction[:3, 3] += [0.01, 0.0, 0.0]
+
+    def refined(degeneracy, on, predicted=prediction):
+        pipeline = _pipeline_over(boxed, 4.9)
+        cfg = pipeline.config.plane_refinement
+        cfg.refine_constrained, cfg.constrained_rounds = "planar", 1
+        cfg.constrained_from_prediction = on
+        cfg.max_step = 0.04  # a round of three steps moves at most 12 cm
+        pose = pipeline._refine_constrained(planes(pipeline, scan_at(boxed, 5.0)),
+                                            registration, degeneracy, predicted)
+        return pose, pipeline.counters
+
+    alone, counters = refined(screened, False)
+    assert alone[0, 3] - 5.0 > 0.1 and counters["constrained_from_prediction"] == 0
+    both, counters = refined(screened, True)
+    assert abs(both[0, 3] - 5.0) < 0.02 and counters["constrained_from_prediction"] == 1
+    # a prediction that fits worse is not taken; a detection's result is not refined from it
+    worse = pose_at(5.0)
+    worse[:3, 3] += [0.6, 0.0, 0.0]
+    np.testing.assert_allclose(refined(screened, True, worse)[0], alone, atol=1e-9)
+    np.testing.assert_allclose(refined(detected, True)[0], alone, atol=1e-9)
+
+
 def test_only_directions_held_to_constrained_information_take_the_refined_step():
     from dataclasses import replace
 

@@ -469,7 +469,7 @@ class OdometryPipeline:
                 if self._remaps(degeneracy):
                     measured = self._remap(source, reg.pose, wheel_prediction(), degeneracy)
             if reg.ok:
-                measured = self._refine_constrained(planes, measured, degeneracy)
+                measured = self._refine_constrained(planes, measured, degeneracy, guess)
         timings["along_track"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
@@ -1061,7 +1061,8 @@ class OdometryPipeline:
         return orthonormal_rows(rows, rtol=1e-3)
 
     def _refine_constrained(self, planes: PlaneFitCache, pose: np.ndarray,
-                            degeneracy: DegeneracyResult) -> np.ndarray:
+                            degeneracy: DegeneracyResult,
+                            prediction: np.ndarray | None = None) -> np.ndarray:
         """``pose`` refined by point-to-plane in the directions outside the degenerate
         subspace (all, or base_link's planar motion: ``plane_refinement.refine_constrained``)
         that point-to-plane holds with at least ``plane_refinement.constrained_information``;
@@ -1074,6 +1075,9 @@ class OdometryPipeline:
         direction it runs in up to ``plane_refinement.constrained_rounds`` rounds, each from
         where the last ended (on planes found again there when it is out of their reach),
         until a round moves the pose less than ``constrained_settle_m``; elsewhere in one.
+        With ``constrained_from_prediction`` such a scan's rounds also start from
+        ``prediction`` (``T_odom_lidar``) and the result the planes fit better is kept (in
+        the directions the rounds do not move, the prediction's own).
         """
         cfg = self.config.plane_refinement
         if not cfg.enabled or cfg.refine_constrained == "off":
@@ -1081,19 +1085,34 @@ class OdometryPipeline:
         C = self._outside(degeneracy, planar=cfg.refine_constrained == "planar")
         if not len(C):
             return pose
-        rounds = cfg.constrained_rounds if _screened_here(degeneracy) else 1
-        stepped = False
+        length = degeneracy.characteristic_length
+        screened = _screened_here(degeneracy)
+        rounds = cfg.constrained_rounds if screened else 1
+        refined = self._constrained_rounds(planes, pose, C, length, rounds)
+        if screened and cfg.constrained_from_prediction and prediction is not None:
+            start = geometry.orthonormalize(np.asarray(prediction, dtype=float))
+            other = self._constrained_rounds(planes, start, C, length, rounds)
+            fits = planes.at(refined)
+            if plane_cost(fits, other, cfg) < plane_cost(fits, refined, cfg):
+                self.counters["constrained_from_prediction"] += 1
+                refined = other
+        if refined is not pose:  # scans, not rounds
+            self.counters["constrained_refined"] += 1
+        return refined
+
+    def _constrained_rounds(self, planes: PlaneFitCache, pose: np.ndarray, C: np.ndarray,
+                            length: float, rounds: int) -> np.ndarray:
+        """Up to ``rounds`` rounds of :meth:`_constrained_round` from ``pose``, each from
+        where the last ended, until one moves the pose less than ``constrained_settle_m``;
+        ``pose`` itself when no round took a step."""
         for round_ in range(rounds):
-            refined = self._constrained_round(planes, pose, C, degeneracy.characteristic_length)
+            refined = self._constrained_round(planes, pose, C, length)
             moved = float(np.linalg.norm(refined[:3, 3] - pose[:3, 3]))
             if round_:
                 self.counters["constrained_rounds_extra"] += 1
-            stepped = stepped or refined is not pose
             pose = refined
-            if moved < cfg.constrained_settle_m:
+            if moved < self.config.plane_refinement.constrained_settle_m:
                 break
-        if stepped:  # scans, not rounds
-            self.counters["constrained_refined"] += 1
         return pose
 
     def _constrained_round(self, planes: PlaneFitCache, pose: np.ndarray, C: np.ndarray,
