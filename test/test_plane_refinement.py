@@ -408,35 +408,51 @@ def test_constrained_directions_are_refined_where_point_to_plane_holds_them():
         PlaneRefinementConfig(refine_constrained="yes").validate()
 
 
-def test_on_a_screened_scan_the_constrained_refinement_goes_on_until_it_settles():
+def _screen_and_detection():
+    """A screen's result (held in every direction) and a detection's, both of dimension 0."""
     from lili_odom.degeneracy.result import DegeneracyResult
 
     screened = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0,
                                 details={"screened": True, "min_information": 2000.0})
-    detected = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0)
+    return screened, DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0)
+
+
+def _off_by(dx: float) -> np.ndarray:
+    pose = pose_at(5.0)
+    pose[0, 3] += dx
+    return pose
+
+
+def _refined_in_short_corridor(degeneracy, start, rounds, mode="all", prediction=None,
+                               from_prediction=False):
+    """The constrained refinement from ``start`` of a scan in the middle of a short closed
+    corridor, steps capped so a round of three moves at most 12 cm: (pose, counters)."""
     boxed = corridor(10.0, end_walls=True)
-    off_by = pose_at(5.0)
-    off_by[:3, 3] += [0.25, 0.0, 0.0]
+    pipeline = _pipeline_over(boxed, 4.9)
+    cfg = pipeline.config.plane_refinement
+    cfg.refine_constrained, cfg.constrained_rounds = mode, rounds
+    cfg.constrained_from_prediction = from_prediction
+    cfg.max_step = 0.04
+    pose = pipeline._refine_constrained(planes(pipeline, scan_at(boxed, 5.0)), start,
+                                        degeneracy, prediction)
+    return pose, pipeline.counters
 
-    def refined(degeneracy, rounds):
-        pipeline = _pipeline_over(boxed, 4.9)
-        cfg = pipeline.config.plane_refinement
-        cfg.refine_constrained, cfg.constrained_rounds = "all", rounds
-        cfg.max_step = 0.04  # a round of three steps moves at most 12 cm
-        pose = pipeline._refine_constrained(planes(pipeline, scan_at(boxed, 5.0)), off_by,
-                                            degeneracy)
-        return pose, pipeline.counters
 
-    one, counters = refined(screened, 1)
+def test_on_a_screened_scan_the_constrained_refinement_goes_on_until_it_settles():
+    screened, detected = _screen_and_detection()
+    off_by = _off_by(0.25)
+    one, counters = _refined_in_short_corridor(screened, off_by, 1)
     assert one[0, 3] - 5.0 > 0.1  # one round: still more than 10 cm off
     assert counters["constrained_rounds_extra"] == 0 and counters["constrained_refined"] == 1
-    rounds, counters = refined(screened, 4)
+    rounds, counters = _refined_in_short_corridor(screened, off_by, 4)
     np.testing.assert_allclose(rounds[:3, 3], [5.0, 0.0, 1.5], atol=0.02)
     assert 1 <= counters["constrained_rounds_extra"] <= 3
     assert counters["constrained_refined"] == 1  # one scan refined, however many rounds
     # a detection's result (not a screen's) gets one round
-    np.testing.assert_allclose(refined(detected, 4)[0], one, atol=1e-9)
+    np.testing.assert_allclose(_refined_in_short_corridor(detected, off_by, 4)[0], one,
+                               atol=1e-9)
     # already where the planes hold it: one round, no more
+    boxed = corridor(10.0, end_walls=True)
     pipeline = _pipeline_over(boxed, 4.9)
     pipeline.config.plane_refinement.refine_constrained = "all"
     pipeline._refine_constrained(planes(pipeline, scan_at(boxed, 5.0)), pose_at(5.0), screened)
@@ -446,35 +462,18 @@ def test_on_a_screened_scan_the_constrained_refinement_goes_on_until_it_settles(
 
 
 def test_a_screened_scan_is_also_refined_from_the_prediction_and_the_better_fit_kept():
-    from lili_odom.degeneracy.result import DegeneracyResult
+    screened, detected = _screen_and_detection()
+    registration = _off_by(0.25)
 
-    screened = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0,
-                                details={"screened": True, "min_information": 2000.0})
-    detected = DegeneracyResult("lili", np.eye(4), np.zeros((0, 6)), 10.0)
-    boxed = corridor(10.0, end_walls=True)
-    registration = pose_at(5.0)
-    registration[:3, 3] += [0.25, 0.0, 0.0]
-    prediction = pose_at(5.0)
-    prediction[:3, 3] += [0.01, 0.0, 0.0]
-
-    def refined(degeneracy, on, predicted=prediction):
-        pipeline = _pipeline_over(boxed, 4.9)
-        cfg = pipeline.config.plane_refinement
-        cfg.refine_constrained, cfg.constrained_rounds = "planar", 1
-        cfg.constrained_from_prediction = on
-        cfg.max_step = 0.04  # a round of three steps moves at most 12 cm
-        pose = pipeline._refine_constrained(planes(pipeline, scan_at(boxed, 5.0)),
-                                            registration, degeneracy, predicted)
-        return pose, pipeline.counters
+    def refined(degeneracy, on, prediction=_off_by(0.01)):
+        return _refined_in_short_corridor(degeneracy, registration, 1, "planar", prediction, on)
 
     alone, counters = refined(screened, False)
     assert alone[0, 3] - 5.0 > 0.1 and counters["constrained_from_prediction"] == 0
     both, counters = refined(screened, True)
     assert abs(both[0, 3] - 5.0) < 0.02 and counters["constrained_from_prediction"] == 1
     # a prediction that fits worse is not taken; a detection's result is not refined from it
-    worse = pose_at(5.0)
-    worse[:3, 3] += [0.6, 0.0, 0.0]
-    np.testing.assert_allclose(refined(screened, True, worse)[0], alone, atol=1e-9)
+    np.testing.assert_allclose(refined(screened, True, _off_by(0.6))[0], alone, atol=1e-9)
     np.testing.assert_allclose(refined(detected, True)[0], alone, atol=1e-9)
 
 
