@@ -1089,7 +1089,8 @@ class OdometryPipeline:
         screened = _screened_here(degeneracy)
         rounds = cfg.constrained_rounds if screened else 1
         refined = self._constrained_rounds(planes, pose, C, length, rounds)
-        if screened and cfg.constrained_from_prediction and prediction is not None:
+        if (screened and cfg.constrained_from_prediction and prediction is not None
+                and np.all(np.isfinite(prediction))):
             start = geometry.orthonormalize(np.asarray(prediction, dtype=float))
             other = self._constrained_rounds(planes, start, C, length, rounds)
             fits = planes.at(refined)

@@ -124,10 +124,10 @@ class PlaneRefinementConfig:
         constrained_from_prediction: on such a scan also run the rounds from the motion
             prediction (IMU and wheels from the last fused state) and keep whichever result
             fits the planes found at the first result better (``plane_cost``, over every
-            plane, so the prediction's height and tilt are scored too). Where the
-            registration and the rounds from it sit in a local minimum behind the robot (a
-            young map's scan pattern while it accelerates), the prediction starts on the
-            other side of it. Default false.
+            plane, so the prediction's height and tilt are scored too). Meant for a
+            registration whose rounds settle behind the robot (a young map's scan pattern
+            while it accelerates from rest), where the prediction may start beyond that
+            minimum. Default false.
         clear_information: a detected direction along which the refinement's information is
             at least this [1/m^2] is measured by the refined pose like a constrained one and
             removed from the degenerate subspace (default 1000: a 3 cm sigma, as
