@@ -482,8 +482,8 @@ def test_random_garbage_never_raises_and_recovers(seed: int) -> None:
             assert np.all(np.isfinite(out.pose)) and np.all(np.isfinite(out.covariance))
         P = est.predict(t + 0.05)
         assert P is not None and np.all(np.isfinite(P))
-    # sane data afterwards is fused again: every update succeeds, and once the garbage IMU
-    # samples (their stamps jittered up to ~0.15 s past t) are behind, with the IMU
+    # sane data afterwards is fused again: every update succeeds, and the IMU is used again
+    # once the garbage IMU samples (their stamps jittered up to ~0.15 s past t) are behind
     feed_imu(est, t, t + 1.0, (0.0, 0.0, G))
     ok = [est.update(t + 0.1 * k, est.last_output.pose) for k in range(1, 6)]
     assert all(o is not None for o in ok)
