@@ -70,6 +70,13 @@ class LidarNoiseConfig:
             axis carrying some would otherwise trade them against the distance. The reported
             covariance adds the wheel random walk along the subspace, which the anchor would
             otherwise hide. Default 0.05; 0 = no anchor.
+        anchor_min_information: the anchor holds only the directions of the subspace along
+            which the wheel increment has at least this information [1/m^2, scaled twists]
+            (:func:`lili_odom.fusion.subspace.measured_directions`); the others are left to
+            the LiDAR's subspace factor and the IMU. A detected roll about a distant axis
+            (a corridor's floor edge) carries a little lateral translation, and anchoring it
+            would set the pose sideways from the wheels' lateral error. 0 (default) anchors
+            the whole subspace.
         subspace_information: keep the LiDAR's own information inside the detected degenerate
             subspace (a prior at the registration refined there by point-to-plane
             Gauss-Newton, weighted by its Hessian; :mod:`lili_odom.pipeline.plane_refinement`)
@@ -92,6 +99,7 @@ class LidarNoiseConfig:
     robust_after_updates: int = 20
     factor: str = "hybrid"
     anchor_sigma: float = 0.05
+    anchor_min_information: float = 0.0
     basis_snap: float = 0.0
     subspace_information: bool = True
     subspace_min_information: float = 1.0
@@ -114,6 +122,7 @@ class LidarNoiseConfig:
         check_range(prefix + "robust_threshold", self.robust_threshold, 0.0, 100.0, lo_open=True)
         check_range(prefix + "basis_snap", self.basis_snap, 0.0, 1.0, hi_open=True)
         check_range(prefix + "anchor_sigma", self.anchor_sigma, 0.0, 100.0, unit="m")
+        check_range(prefix + "anchor_min_information", self.anchor_min_information, 0.0, 1e12)
         if self.factor not in LIDAR_FACTORS:
             raise ValueError(f"{prefix}factor must be one of {', '.join(LIDAR_FACTORS)}, "
                              f"got {self.factor!r}")

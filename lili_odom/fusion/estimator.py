@@ -128,6 +128,7 @@ from lili_odom.fusion.subspace import (
     covariance_along,
     degenerate_anchor,
     inflate_along,
+    measured_directions,
     scaled_lidar_to_base,
     split_information,
     sqrt_information,
@@ -562,19 +563,32 @@ class FusionEstimator:
         if (split.lidar is not None and cfg.lidar.factor != "between" and split.dimension
                 and wheel.corrected is not None and wheel.information is not None
                 and cfg.lidar.anchor_sigma > 0.0):
-            # absolute LiDAR prior: its degenerate components come from the wheel prediction
-            plan.lidar_target, omega_anchor = degenerate_anchor(
-                lidar.pose, matrix(prev.pose) @ wheel.corrected, lidar.basis, lidar.length,
-                self.T_base_lidar, cfg.lidar.anchor_sigma,
-                reference_covariance=from_gtsam_matrix(prev.cov_gtsam),
-                reference_information=wheel.information)
-            plan.lidar_information = split.lidar + omega_anchor
-            # the anchor is an absolute pseudo-measurement: the graph's marginal along the
-            # subspace stops growing, so the wheel random walk is added to the reported one
-            plan.walk_step = float(np.linalg.eigvalsh(covariance_along(
-                np.linalg.inv(wheel.information), lidar.basis, lidar.length,
-                self.T_base_lidar)).max())
+            self._anchor(plan, prev, lidar, wheel)
         return plan
+
+    def _anchor(self, plan: _FactorPlan, prev: _State, lidar: LidarMeasurement,
+                wheel: WheelIncrement) -> None:
+        """The absolute LiDAR prior's degenerate components from the wheel prediction
+        (``lidar.anchor_sigma``), along the directions the wheel increment measures
+        (``lidar.anchor_min_information``)."""
+        cfg = self.config.lidar
+        basis = lidar.basis
+        if cfg.anchor_min_information > 0.0:
+            basis = measured_directions(basis, wheel.information, lidar.length,
+                                        self.T_base_lidar, cfg.anchor_min_information)
+            if not len(basis):
+                return
+        plan.lidar_target, omega_anchor = degenerate_anchor(
+            lidar.pose, matrix(prev.pose) @ wheel.corrected, basis, lidar.length,
+            self.T_base_lidar, cfg.anchor_sigma,
+            reference_covariance=from_gtsam_matrix(prev.cov_gtsam),
+            reference_information=wheel.information)
+        plan.lidar_information = plan.split.lidar + omega_anchor
+        # the anchor is an absolute pseudo-measurement: the graph's marginal along the
+        # subspace stops growing, so the wheel random walk is added to the reported one
+        plan.walk_step = float(np.linalg.eigvalsh(covariance_along(
+            np.linalg.inv(wheel.information), basis, lidar.length,
+            self.T_base_lidar)).max())
 
     def _solve(self, prev: _State, t: float, lidar: LidarMeasurement, wheel: WheelIncrement,
                plan: _FactorPlan, notes: list[str]) -> FusionOutput | None:

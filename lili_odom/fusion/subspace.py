@@ -46,6 +46,7 @@ __all__ = [
     "remap_pose",
     "weighted_restriction",
     "degenerate_anchor",
+    "measured_directions",
     "snap_basis",
     "covariance_along",
     "inflate_along",
@@ -333,6 +334,24 @@ def degenerate_anchor(
         cov_deg = cov_deg + covariance_along(reference_covariance, deg, length, T_base_lidar)
     omega = Minv.T @ (deg.T @ np.linalg.inv(cov_deg) @ deg) @ Minv
     return T_target, 0.5 * (omega + omega.T)
+
+
+def measured_directions(basis_scaled: np.ndarray, information: np.ndarray, length: float,
+                        T_base_lidar: np.ndarray, min_information: float) -> np.ndarray:
+    """Orthonormal rows (m, 6, scaled LiDAR twists) spanning the directions of the subspace
+    ``basis_scaled`` (k, 6) along which ``information`` (6x6 ``(v, w)`` base_link, e.g. a
+    wheel increment's) is at least ``min_information`` [1/m^2, scaled twists]: the
+    eigenvectors of the information restricted to the subspace, m <= k.
+
+    A detected direction that is mostly roll or pitch about a distant axis carries a little
+    lateral or vertical translation; wheels measure it through that translation alone."""
+    deg = orthonormal_rows(basis_scaled)
+    if not len(deg):
+        return deg
+    M = scaled_lidar_to_base(T_base_lidar, length)
+    W = M.T @ np.asarray(information, dtype=float) @ M
+    lam, U = np.linalg.eigh(deg @ (0.5 * (W + W.T)) @ deg.T)
+    return U[:, lam >= min_information].T @ deg
 
 
 def covariance_along(cov_base: np.ndarray, basis_scaled: np.ndarray, length: float,
