@@ -70,13 +70,14 @@ class LidarNoiseConfig:
             axis carrying some would otherwise trade them against the distance. The reported
             covariance adds the wheel random walk along the subspace, which the anchor would
             otherwise hide. Default 0.05; 0 = no anchor.
-        anchor_min_information: the anchor holds only the directions of the subspace along
-            which the wheel increment has at least this information [1/m^2, scaled twists]
-            (:func:`lili_odom.fusion.subspace.measured_directions`); the others are left to
-            the LiDAR's subspace factor and the IMU. A detected roll about a distant axis
-            (a corridor's floor edge) carries a little lateral translation, and anchoring it
-            would set the pose sideways from the wheels' lateral error. 0 (default) anchors
-            the whole subspace.
+        anchor_min_information: the anchor takes from the wheel prediction only the
+            components along the directions of the subspace the wheel increment measures with
+            at least this information [1/m^2, scaled twists]
+            (:func:`lili_odom.fusion.subspace.measured_directions`), and holds the others at
+            the registration's own. A detected roll about a distant axis (a corridor's floor
+            edge) carries a little lateral translation: fitted to the wheels through it alone,
+            the prior's target would move sideways by their lateral error, amplified.
+            0 (default): every direction from the wheel prediction.
         subspace_information: keep the LiDAR's own information inside the detected degenerate
             subspace (a prior at the registration refined there by point-to-plane
             Gauss-Newton, weighted by its Hessian; :mod:`lili_odom.pipeline.plane_refinement`)

@@ -568,26 +568,27 @@ class FusionEstimator:
 
     def _anchor(self, plan: _FactorPlan, prev: _State, lidar: LidarMeasurement,
                 wheel: WheelIncrement) -> None:
-        """The absolute LiDAR prior's degenerate components from the wheel prediction
-        (``lidar.anchor_sigma``), along the directions the wheel increment measures
-        (``lidar.anchor_min_information``)."""
+        """The absolute LiDAR prior held along the degenerate subspace with
+        ``lidar.anchor_sigma``: at the wheel prediction's components along the directions the
+        wheel increment measures (``lidar.anchor_min_information``; 0: all of them), at the
+        registration's own along the rest."""
         cfg = self.config.lidar
-        basis = lidar.basis
-        if cfg.anchor_min_information > 0.0:
-            basis = measured_directions(basis, wheel.information, lidar.length,
-                                        self.T_base_lidar, cfg.anchor_min_information)
-            if not len(basis):
-                return
+        reference = matrix(prev.pose) @ wheel.corrected
         plan.lidar_target, omega_anchor = degenerate_anchor(
-            lidar.pose, matrix(prev.pose) @ wheel.corrected, basis, lidar.length,
-            self.T_base_lidar, cfg.anchor_sigma,
-            reference_covariance=from_gtsam_matrix(prev.cov_gtsam),
+            lidar.pose, reference, lidar.basis, lidar.length, self.T_base_lidar,
+            cfg.anchor_sigma, reference_covariance=from_gtsam_matrix(prev.cov_gtsam),
             reference_information=wheel.information)
+        if cfg.anchor_min_information > 0.0:
+            measured = measured_directions(lidar.basis, wheel.information, lidar.length,
+                                           self.T_base_lidar, cfg.anchor_min_information)
+            plan.lidar_target = lidar.pose if not len(measured) else degenerate_anchor(
+                lidar.pose, reference, measured, lidar.length, self.T_base_lidar,
+                cfg.anchor_sigma, reference_information=wheel.information)[0]
         plan.lidar_information = plan.split.lidar + omega_anchor
         # the anchor is an absolute pseudo-measurement: the graph's marginal along the
         # subspace stops growing, so the wheel random walk is added to the reported one
         plan.walk_step = float(np.linalg.eigvalsh(covariance_along(
-            np.linalg.inv(wheel.information), basis, lidar.length,
+            np.linalg.inv(wheel.information), lidar.basis, lidar.length,
             self.T_base_lidar)).max())
 
     def _solve(self, prev: _State, t: float, lidar: LidarMeasurement, wheel: WheelIncrement,
