@@ -7,12 +7,15 @@ import pytest
 
 from lili_odom.fusion import FusionConfig, FusionEstimator
 from lili_odom.fusion.config import LidarNoiseConfig
+from lili_odom.fusion.estimator import SubspaceMeasurement
 from lili_odom.fusion.subspace import (
     degenerate_anchor,
+    measured_directions,
     orthonormal_rows,
     scaled_lidar_to_base,
     snap_basis,
 )
+from lili_odom.fusion.wheel import WheelNoiseConfig, wheel_information
 from lili_odom.geometry import exp, log
 from test_fusion import MOUNT, G, config, degeneracy, feed_imu, pose
 
@@ -74,6 +77,46 @@ def test_anchor_weighted_by_the_reference_ignores_a_tilt_it_does_not_measure(
     assert np.linalg.matrix_rank(omega, tol=1e-6 * np.abs(omega).max()) == 1
 
 
+#: a detected roll about an axis beside and below the sensor (a corridor's floor edge), as a
+#: scaled LiDAR twist: mostly roll, with a little lateral and vertical translation
+ROLL_ABOUT_EDGE = np.array([0.0, 0.07, 0.1, 0.99, 0.0, 0.0]) / np.linalg.norm([0.07, 0.1, 0.99])
+
+
+def test_measured_directions_keep_the_wheels_axis_and_drop_a_roll_they_do_not_measure() -> None:
+    wheel = wheel_information(exp(np.array([0.08, 0, 0, 0, 0, 0])), WheelNoiseConfig())
+    basis = np.vstack([[1.0, 0, 0, 0, 0, 0], ROLL_ABOUT_EDGE])
+    kept = measured_directions(basis, wheel, 10.0, np.eye(4), 400.0)
+    np.testing.assert_allclose(np.abs(kept), [[1.0, 0, 0, 0, 0, 0]], atol=1e-9)
+    assert measured_directions(ROLL_ABOUT_EDGE, wheel, 10.0, np.eye(4), 400.0).shape == (0, 6)
+    assert len(measured_directions(basis, wheel, 10.0, np.eye(4), 0.0)) == 2
+
+
+@pytest.mark.parametrize("with_subspace", [False, True])
+def test_a_roll_the_wheels_do_not_measure_is_held_at_the_registration(
+        with_subspace: bool) -> None:
+    """Wheels that drift sideways by 1 cm per 10 cm, a registration exactly on the truth and a
+    detected roll about a corridor's floor edge: anchored at the wheel prediction, the roll's
+    lateral part moves the pose towards the wheels; held at the registration, it does not."""
+    v = np.array([1.0, 0.0, 0.0])
+    lateral = {}
+    for min_information in (0.0, 400.0):
+        est = FusionEstimator(config(lidar=LidarNoiseConfig(
+            anchor_min_information=min_information)))
+        n = 40
+        feed_imu(est, -1.0, 0.1 * n + 0.05, (0.0, 0.0, G))
+        est.initialize(0.0, velocity=v)
+        for i in range(1, n + 1):
+            truth = pose(t=v * 0.1 * i)
+            sub = (SubspaceMeasurement(truth, 300.0 * np.outer(ROLL_ABOUT_EDGE, ROLL_ABOUT_EDGE),
+                                       10.0) if with_subspace else None)
+            out = est.update(0.1 * i, truth, degeneracy(ROLL_ABOUT_EDGE),
+                             wheel_delta=pose(t=(0.1, 0.01, 0.0)), subspace=sub)
+        lateral[min_information] = np.linalg.norm(out.pose[1:3, 3])
+        assert out.pose[0, 3] == pytest.approx(4.0, abs=0.01)
+    assert lateral[0.0] > 0.02
+    assert lateral[400.0] < 0.01
+
+
 def test_prior_factor_reports_the_wheel_random_walk_along_the_axis() -> None:
     v = np.array([1.0, 0.0, 0.0])
     est = FusionEstimator(config(lidar=LidarNoiseConfig(factor="prior")))
@@ -94,6 +137,8 @@ def test_invalid_factor_is_rejected() -> None:
         LidarNoiseConfig(factor="absolute").validate()
     with pytest.raises(ValueError, match="anchor_sigma"):
         LidarNoiseConfig(anchor_sigma=-1.0).validate()
+    with pytest.raises(ValueError, match="anchor_min_information"):
+        LidarNoiseConfig(anchor_min_information=-1.0).validate()
     FusionConfig(lidar=LidarNoiseConfig(factor="prior")).validate()
 
 
