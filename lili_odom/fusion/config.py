@@ -76,9 +76,10 @@ class LidarNoiseConfig:
             (:func:`lili_odom.fusion.subspace.measured_directions`), and holds the others at
             the registration's own. A detected roll about a distant axis (a corridor's floor
             edge) carries a little lateral translation: fitted to the wheels through it alone,
-            the prior's target would move sideways by their lateral error, amplified.
-            Default 400 (the default ``anchor_sigma``'s 5 cm); 0 = every direction from the
-            wheel prediction.
+            the prior's target would move sideways by their lateral error, amplified. The
+            information is the increment's, so it falls with the time between updates: at
+            1 s (1 m at 1 m/s) a degenerate direction of travel falls below 400 and would be
+            held at the registration. 0 (default): every direction from the wheel prediction.
         subspace_information: keep the LiDAR's own information inside the detected degenerate
             subspace (a prior at the registration refined there by point-to-plane
             Gauss-Newton, weighted by its Hessian; :mod:`lili_odom.pipeline.plane_refinement`)
@@ -101,7 +102,7 @@ class LidarNoiseConfig:
     robust_after_updates: int = 20
     factor: str = "hybrid"
     anchor_sigma: float = 0.05
-    anchor_min_information: float = 400.0
+    anchor_min_information: float = 0.0
     basis_snap: float = 0.0
     subspace_information: bool = True
     subspace_min_information: float = 1.0
