@@ -1,5 +1,6 @@
 """The absolute LiDAR factor (``fusion.lidar.factor = "prior"``): basis snapping, the
-degenerate anchor and the covariance reported along the anchored subspace."""
+degenerate anchor (and the directions it takes from the wheels) and the covariance reported
+along the anchored subspace."""
 from __future__ import annotations
 
 import numpy as np
