@@ -128,7 +128,6 @@ from lili_odom.fusion.subspace import (
     covariance_along,
     degenerate_anchor,
     inflate_along,
-    measured_directions,
     scaled_lidar_to_base,
     split_information,
     sqrt_information,
@@ -573,17 +572,12 @@ class FusionEstimator:
         wheel increment measures (``lidar.anchor_min_information``; 0: all of them), at the
         registration's own along the rest."""
         cfg = self.config.lidar
-        reference = matrix(prev.pose) @ wheel.corrected
         plan.lidar_target, omega_anchor = degenerate_anchor(
-            lidar.pose, reference, lidar.basis, lidar.length, self.T_base_lidar,
-            cfg.anchor_sigma, reference_covariance=from_gtsam_matrix(prev.cov_gtsam),
-            reference_information=wheel.information)
-        if cfg.anchor_min_information > 0.0:
-            measured = measured_directions(lidar.basis, wheel.information, lidar.length,
-                                           self.T_base_lidar, cfg.anchor_min_information)
-            plan.lidar_target = lidar.pose if not len(measured) else degenerate_anchor(
-                lidar.pose, reference, measured, lidar.length, self.T_base_lidar,
-                cfg.anchor_sigma, reference_information=wheel.information)[0]
+            lidar.pose, matrix(prev.pose) @ wheel.corrected, lidar.basis, lidar.length,
+            self.T_base_lidar, cfg.anchor_sigma,
+            reference_covariance=from_gtsam_matrix(prev.cov_gtsam),
+            reference_information=wheel.information,
+            min_information=cfg.anchor_min_information)
         plan.lidar_information = plan.split.lidar + omega_anchor
         # the anchor is an absolute pseudo-measurement: the graph's marginal along the
         # subspace stops growing, so the wheel random walk is added to the reported one

@@ -285,6 +285,7 @@ def degenerate_anchor(
     reference_covariance: np.ndarray | None = None,
     iterations: int = 3,
     reference_information: np.ndarray | None = None,
+    min_information: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A registration pose whose degenerate components are taken from a reference pose.
 
@@ -316,6 +317,11 @@ def degenerate_anchor(
             tunnel axis carries some roll, and without the weight 0.02 rad of roll
             disagreement moves the target by more than 5 cm along the axis
             (``test/test_fusion_prior_factor.py``).
+        min_information: with ``reference_information``, the target takes the reference's
+            components only along the directions of the subspace the reference measures with
+            at least this information [1/m^2, scaled twists] (:func:`measured_directions`)
+            and keeps ``T_meas``'s along the rest; ``omega`` covers the whole subspace either
+            way. 0 (default): every direction from the reference.
 
     Returns:
         ``(T_target, omega)``: ``T_meas`` moved along the degenerate subspace onto ``T_ref``'s
@@ -326,9 +332,14 @@ def degenerate_anchor(
     Minv = np.linalg.inv(M)
     deg = orthonormal_rows(basis_scaled)
     weight = None if reference_information is None else M.T @ reference_information @ M
-    T_target = remap_pose(np.asarray(T_meas, dtype=float) @ T_base_lidar,
-                          np.asarray(T_ref, dtype=float) @ T_base_lidar, deg, length,
-                          iterations, weight=weight) @ np.linalg.inv(T_base_lidar)
+    moved = deg
+    if weight is not None and min_information > 0.0 and len(deg):
+        moved = _rows_measured(deg, weight, min_information)
+    T_target = np.asarray(T_meas, dtype=float)
+    if len(moved):
+        T_target = remap_pose(T_target @ T_base_lidar,
+                              np.asarray(T_ref, dtype=float) @ T_base_lidar, moved, length,
+                              iterations, weight=weight) @ np.linalg.inv(T_base_lidar)
     cov_deg = np.eye(len(deg)) * sigma**2
     if reference_covariance is not None:
         cov_deg = cov_deg + covariance_along(reference_covariance, deg, length, T_base_lidar)
@@ -349,8 +360,13 @@ def measured_directions(basis_scaled: np.ndarray, information: np.ndarray, lengt
     if not len(deg):
         return deg
     M = scaled_lidar_to_base(T_base_lidar, length)
-    W = M.T @ np.asarray(information, dtype=float) @ M
-    lam, U = np.linalg.eigh(deg @ (0.5 * (W + W.T)) @ deg.T)
+    return _rows_measured(deg, M.T @ np.asarray(information, dtype=float) @ M, min_information)
+
+
+def _rows_measured(deg: np.ndarray, weight: np.ndarray, min_information: float) -> np.ndarray:
+    """The eigenvectors (rows) of ``weight`` (6x6, scaled twists) restricted to the orthonormal
+    rows ``deg`` with eigenvalue at least ``min_information``."""
+    lam, U = np.linalg.eigh(deg @ (0.5 * (weight + weight.T)) @ deg.T)
     return U[:, lam >= min_information].T @ deg
 
 
