@@ -83,13 +83,20 @@ def test_anchor_weighted_by_the_reference_ignores_a_tilt_it_does_not_measure(
 ROLL_ABOUT_EDGE = np.array([0.0, 0.07, 0.1, 0.99, 0.0, 0.0]) / np.linalg.norm([0.07, 0.1, 0.99])
 
 
-def test_measured_directions_keep_the_wheels_axis_and_drop_a_roll_they_do_not_measure() -> None:
-    wheel = wheel_information(exp(np.array([0.08, 0, 0, 0, 0, 0])), WheelNoiseConfig())
+@pytest.mark.parametrize("metres", [0.02, 0.1, 1.0, 3.0])
+def test_measured_directions_keep_the_wheels_axis_and_drop_a_roll_they_do_not_measure(
+        metres: float) -> None:
+    """The choice is the same for a short and a long wheel increment."""
+    wheel = wheel_information(exp(np.array([metres, 0, 0, 0, 0, 0])), WheelNoiseConfig())
     basis = np.vstack([[1.0, 0, 0, 0, 0, 0], ROLL_ABOUT_EDGE])
-    kept = measured_directions(basis, wheel, 10.0, np.eye(4), 400.0)
+    kept = measured_directions(basis, wheel, 10.0, np.eye(4), 0.04)
     np.testing.assert_allclose(np.abs(kept), [[1.0, 0, 0, 0, 0, 0]], atol=1e-9)
-    assert measured_directions(ROLL_ABOUT_EDGE, wheel, 10.0, np.eye(4), 400.0).shape == (0, 6)
+    assert measured_directions(ROLL_ABOUT_EDGE, wheel, 10.0, np.eye(4), 0.04).shape == (0, 6)
     assert len(measured_directions(basis, wheel, 10.0, np.eye(4), 0.0)) == 2
+    # a lateral direction (measured as well as the forward one) and a vertical one (4x its
+    # sigma: 1/16 of the information) are kept
+    updown = np.array([[0, 1.0, 0, 0, 0, 0], [0, 0, 1.0, 0, 0, 0]])
+    assert len(measured_directions(updown, wheel, 10.0, np.eye(4), 0.04)) == 2
 
 
 @pytest.mark.parametrize("with_subspace", [False, True])
@@ -100,9 +107,9 @@ def test_a_roll_the_wheels_do_not_measure_is_held_at_the_registration(
     lateral part moves the pose towards the wheels; held at the registration, it does not."""
     v = np.array([1.0, 0.0, 0.0])
     lateral = {}
-    for min_information in (0.0, 400.0):
+    for ratio in (0.0, 0.04):
         est = FusionEstimator(config(lidar=LidarNoiseConfig(
-            anchor_min_information=min_information)))
+            anchor_min_information_ratio=ratio)))
         n = 40
         feed_imu(est, -1.0, 0.1 * n + 0.05, (0.0, 0.0, G))
         est.initialize(0.0, velocity=v)
@@ -112,10 +119,10 @@ def test_a_roll_the_wheels_do_not_measure_is_held_at_the_registration(
                                        10.0) if with_subspace else None)
             out = est.update(0.1 * i, truth, degeneracy(ROLL_ABOUT_EDGE),
                              wheel_delta=pose(t=(0.1, 0.01, 0.0)), subspace=sub)
-        lateral[min_information] = np.linalg.norm(out.pose[1:3, 3])
+        lateral[ratio] = np.linalg.norm(out.pose[1:3, 3])
         assert out.pose[0, 3] == pytest.approx(4.0, abs=0.01)
     assert lateral[0.0] > 0.02
-    assert lateral[400.0] < 0.01
+    assert lateral[0.04] < 0.01
 
 
 def test_prior_factor_reports_the_wheel_random_walk_along_the_axis() -> None:
@@ -138,8 +145,9 @@ def test_invalid_factor_is_rejected() -> None:
         LidarNoiseConfig(factor="absolute").validate()
     with pytest.raises(ValueError, match="anchor_sigma"):
         LidarNoiseConfig(anchor_sigma=-1.0).validate()
-    with pytest.raises(ValueError, match="anchor_min_information"):
-        LidarNoiseConfig(anchor_min_information=-1.0).validate()
+    for bad in (-0.1, 1.5):
+        with pytest.raises(ValueError, match="anchor_min_information_ratio"):
+            LidarNoiseConfig(anchor_min_information_ratio=bad).validate()
     FusionConfig(lidar=LidarNoiseConfig(factor="prior")).validate()
 
 

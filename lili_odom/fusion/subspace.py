@@ -285,7 +285,7 @@ def degenerate_anchor(
     reference_covariance: np.ndarray | None = None,
     iterations: int = 3,
     reference_information: np.ndarray | None = None,
-    min_information: float = 0.0,
+    min_information_ratio: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A registration pose whose degenerate components are taken from a reference pose.
 
@@ -317,11 +317,13 @@ def degenerate_anchor(
             tunnel axis carries some roll, and without the weight 0.02 rad of roll
             disagreement moves the target by more than 5 cm along the axis
             (``test/test_fusion_prior_factor.py``).
-        min_information: with ``reference_information``, the target takes the reference's
-            components only along the directions of the subspace the reference measures with
-            at least this information [1/m^2, scaled twists] (:func:`measured_directions`)
-            and keeps ``T_meas``'s along the rest; ``omega`` covers the whole subspace either
-            way. 0 (default): every direction from the reference.
+        min_information_ratio: with ``reference_information``, the target takes the
+            reference's components only along the directions of the subspace the reference
+            measures with at least this share of its best-measured translation's information
+            (:func:`measured_directions`) and keeps ``T_meas``'s along the rest; ``omega``
+            covers the whole subspace either way. A share, not an absolute information, so
+            the choice does not depend on the reference increment's length. 0 (default):
+            every direction from the reference.
 
     Returns:
         ``(T_target, omega)``: ``T_meas`` moved along the degenerate subspace onto ``T_ref``'s
@@ -333,8 +335,9 @@ def degenerate_anchor(
     deg = orthonormal_rows(basis_scaled)
     weight = None if reference_information is None else M.T @ reference_information @ M
     moved = deg
-    if weight is not None and min_information > 0.0 and len(deg):
-        moved = _rows_measured(deg, weight, min_information)
+    if weight is not None and min_information_ratio > 0.0 and len(deg):
+        moved = _rows_measured(deg, weight,
+                               min_information_ratio * _best_translation(reference_information))
     T_target = np.asarray(T_meas, dtype=float)
     if len(moved):
         T_target = remap_pose(T_target @ T_base_lidar,
@@ -348,19 +351,30 @@ def degenerate_anchor(
 
 
 def measured_directions(basis_scaled: np.ndarray, information: np.ndarray, length: float,
-                        T_base_lidar: np.ndarray, min_information: float) -> np.ndarray:
+                        T_base_lidar: np.ndarray, min_ratio: float) -> np.ndarray:
     """Orthonormal rows (m, 6, scaled LiDAR twists) spanning the directions of the subspace
     ``basis_scaled`` (k, 6) along which ``information`` (6x6 ``(v, w)`` base_link, e.g. a
-    wheel increment's) is at least ``min_information`` [1/m^2, scaled twists]: the
-    eigenvectors of the information restricted to the subspace, m <= k.
+    wheel increment's) is at least ``min_ratio`` times the information of its best-measured
+    base_link translation: the eigenvectors of the information restricted to the subspace,
+    m <= k.
 
     A detected direction that is mostly roll or pitch about a distant axis carries a little
-    lateral or vertical translation; wheels measure it through that translation alone."""
+    lateral or vertical translation; wheels measure it through that translation alone. The
+    share does not change with the increment's length when, as for wheels, every sigma grows
+    with the distance travelled."""
     deg = orthonormal_rows(basis_scaled)
     if not len(deg):
         return deg
     M = scaled_lidar_to_base(T_base_lidar, length)
-    return _rows_measured(deg, M.T @ np.asarray(information, dtype=float) @ M, min_information)
+    information = np.asarray(information, dtype=float)
+    return _rows_measured(deg, M.T @ information @ M,
+                          min_ratio * _best_translation(information))
+
+
+def _best_translation(information: np.ndarray) -> float:
+    """Largest eigenvalue of the translation block of a 6x6 ``(v, w)`` information [1/m^2]."""
+    block = np.asarray(information, dtype=float)[:3, :3]
+    return float(np.linalg.eigvalsh(0.5 * (block + block.T)).max())
 
 
 def _rows_measured(deg: np.ndarray, weight: np.ndarray, min_information: float) -> np.ndarray:
