@@ -11,12 +11,11 @@ from lili_odom.fusion.config import LidarNoiseConfig
 from lili_odom.fusion.estimator import SubspaceMeasurement
 from lili_odom.fusion.subspace import (
     degenerate_anchor,
-    measured_directions,
+    planar_directions,
     orthonormal_rows,
     scaled_lidar_to_base,
     snap_basis,
 )
-from lili_odom.fusion.wheel import WheelNoiseConfig, wheel_information
 from lili_odom.geometry import exp, log
 from test_fusion import MOUNT, G, config, degeneracy, feed_imu, pose
 
@@ -83,20 +82,22 @@ def test_anchor_weighted_by_the_reference_ignores_a_tilt_it_does_not_measure(
 ROLL_ABOUT_EDGE = np.array([0.0, 0.07, 0.1, 0.99, 0.0, 0.0]) / np.linalg.norm([0.07, 0.1, 0.99])
 
 
-@pytest.mark.parametrize("metres", [0.02, 0.1, 1.0, 3.0])
-def test_measured_directions_keep_the_wheels_axis_and_drop_a_roll_they_do_not_measure(
-        metres: float) -> None:
-    """The choice is the same for a short and a long wheel increment."""
-    wheel = wheel_information(exp(np.array([metres, 0, 0, 0, 0, 0])), WheelNoiseConfig())
-    basis = np.vstack([[1.0, 0, 0, 0, 0, 0], ROLL_ABOUT_EDGE])
-    kept = measured_directions(basis, wheel, 10.0, np.eye(4), 0.04)
-    np.testing.assert_allclose(np.abs(kept), [[1.0, 0, 0, 0, 0, 0]], atol=1e-9)
-    assert measured_directions(ROLL_ABOUT_EDGE, wheel, 10.0, np.eye(4), 0.04).shape == (0, 6)
-    assert len(measured_directions(basis, wheel, 10.0, np.eye(4), 0.0)) == 2
-    # a lateral direction (measured as well as the forward one) and a vertical one (4x its
-    # sigma: 1/16 of the information) are kept
-    updown = np.array([[0, 1.0, 0, 0, 0, 0], [0, 0, 1.0, 0, 0, 0]])
-    assert len(measured_directions(updown, wheel, 10.0, np.eye(4), 0.04)) == 2
+@pytest.mark.parametrize("length", [3.0, 10.0, 30.0])
+def test_planar_directions_keep_travel_and_yaw_and_drop_a_roll_about_a_floor_edge(
+        length: float) -> None:
+    mount = pose(t=(0.2, 0.0, 0.6))
+    travel, yaw = [1.0, 0, 0, 0, 0, 0], [0, 0, 0, 0, 0, 1.0]
+    kept = planar_directions(np.vstack([travel, ROLL_ABOUT_EDGE]), length, mount, 0.5)
+    np.testing.assert_allclose(np.abs(kept), [travel], atol=1e-9)
+    assert planar_directions(ROLL_ABOUT_EDGE, length, mount, 0.5).shape == (0, 6)
+    # a yaw about the sensor is a yaw of base_link with a lateral swing of the mount's lever
+    kept = planar_directions(np.vstack([yaw, ROLL_ABOUT_EDGE]), length, mount, 0.5)
+    np.testing.assert_allclose(np.abs(kept), [yaw], atol=1e-9)
+    # height and pitch are not planar motion; 0 keeps everything
+    assert planar_directions(np.array([[0, 0, 1.0, 0, 0, 0], [0, 0, 0, 0, 1.0, 0]]), length,
+                             mount, 0.5).shape == (0, 6)
+    assert len(planar_directions(np.vstack([travel, ROLL_ABOUT_EDGE]), length, mount,
+                                 0.0)) == 2
 
 
 @pytest.mark.parametrize("with_subspace", [False, True])
@@ -107,9 +108,9 @@ def test_a_roll_the_wheels_do_not_measure_is_held_at_the_registration(
     lateral part moves the pose towards the wheels; held at the registration, it does not."""
     v = np.array([1.0, 0.0, 0.0])
     lateral = {}
-    for ratio in (0.0, 0.04):
+    for share in (0.0, 0.5):
         est = FusionEstimator(config(lidar=LidarNoiseConfig(
-            anchor_min_information_ratio=ratio)))
+            anchor_min_planar_share=share)))
         n = 40
         feed_imu(est, -1.0, 0.1 * n + 0.05, (0.0, 0.0, G))
         est.initialize(0.0, velocity=v)
@@ -119,10 +120,10 @@ def test_a_roll_the_wheels_do_not_measure_is_held_at_the_registration(
                                        10.0) if with_subspace else None)
             out = est.update(0.1 * i, truth, degeneracy(ROLL_ABOUT_EDGE),
                              wheel_delta=pose(t=(0.1, 0.01, 0.0)), subspace=sub)
-        lateral[ratio] = np.linalg.norm(out.pose[1:3, 3])
+        lateral[share] = np.linalg.norm(out.pose[1:3, 3])
         assert out.pose[0, 3] == pytest.approx(4.0, abs=0.01)
     assert lateral[0.0] > 0.02
-    assert lateral[0.04] < 0.01
+    assert lateral[0.5] < 0.01
 
 
 def test_prior_factor_reports_the_wheel_random_walk_along_the_axis() -> None:
@@ -146,8 +147,8 @@ def test_invalid_factor_is_rejected() -> None:
     with pytest.raises(ValueError, match="anchor_sigma"):
         LidarNoiseConfig(anchor_sigma=-1.0).validate()
     for bad in (-0.1, 1.5):
-        with pytest.raises(ValueError, match="anchor_min_information_ratio"):
-            LidarNoiseConfig(anchor_min_information_ratio=bad).validate()
+        with pytest.raises(ValueError, match="anchor_min_planar_share"):
+            LidarNoiseConfig(anchor_min_planar_share=bad).validate()
     FusionConfig(lidar=LidarNoiseConfig(factor="prior")).validate()
 
 

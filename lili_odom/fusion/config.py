@@ -70,15 +70,14 @@ class LidarNoiseConfig:
             axis carrying some would otherwise trade them against the distance. The reported
             covariance adds the wheel random walk along the subspace, which the anchor would
             otherwise hide. Default 0.05; 0 = no anchor.
-        anchor_min_information_ratio: the anchor takes from the wheel prediction only the
-            components along the directions of the subspace the wheel increment measures with
-            at least this share of the information of its best-measured translation
-            (:func:`lili_odom.fusion.subspace.measured_directions`), and holds the others at
-            the registration's own. A detected roll about a distant axis (a corridor's floor
+        anchor_min_planar_share: the anchor takes from the wheel prediction only the
+            components along the directions of the subspace that are at least this share
+            planar motion of base_link (x, y, yaw;
+            :func:`lili_odom.fusion.subspace.planar_directions`), and holds the others at the
+            registration's own. A detected roll about a distant axis (a corridor's floor
             edge) carries a little lateral translation: fitted to the wheels through it alone,
-            the prior's target would move sideways by their lateral error, amplified. A share
-            of the increment's own information, so the same directions are chosen whatever
-            the time between updates. 0 (default): every direction from the wheel prediction.
+            the prior's target would move sideways by their lateral error, amplified.
+            0 (default): every direction from the wheel prediction.
         subspace_information: keep the LiDAR's own information inside the detected degenerate
             subspace (a prior at the registration refined there by point-to-plane
             Gauss-Newton, weighted by its Hessian; :mod:`lili_odom.pipeline.plane_refinement`)
@@ -101,7 +100,7 @@ class LidarNoiseConfig:
     robust_after_updates: int = 20
     factor: str = "hybrid"
     anchor_sigma: float = 0.05
-    anchor_min_information_ratio: float = 0.0
+    anchor_min_planar_share: float = 0.0
     basis_snap: float = 0.0
     subspace_information: bool = True
     subspace_min_information: float = 1.0
@@ -124,8 +123,7 @@ class LidarNoiseConfig:
         check_range(prefix + "robust_threshold", self.robust_threshold, 0.0, 100.0, lo_open=True)
         check_range(prefix + "basis_snap", self.basis_snap, 0.0, 1.0, hi_open=True)
         check_range(prefix + "anchor_sigma", self.anchor_sigma, 0.0, 100.0, unit="m")
-        check_range(prefix + "anchor_min_information_ratio", self.anchor_min_information_ratio,
-                    0.0, 1.0)
+        check_range(prefix + "anchor_min_planar_share", self.anchor_min_planar_share, 0.0, 1.0)
         if self.factor not in LIDAR_FACTORS:
             raise ValueError(f"{prefix}factor must be one of {', '.join(LIDAR_FACTORS)}, "
                              f"got {self.factor!r}")

@@ -569,15 +569,15 @@ class FusionEstimator:
                 wheel: WheelIncrement) -> None:
         """The absolute LiDAR prior held along the degenerate subspace with
         ``lidar.anchor_sigma``: at the wheel prediction's components along the directions the
-        wheel increment measures (``lidar.anchor_min_information_ratio``; 0: all of them), at the
-        registration's own along the rest."""
+        wheels measure (mostly planar motion, ``lidar.anchor_min_planar_share``; 0: all of
+        them), at the registration's own along the rest."""
         cfg = self.config.lidar
         plan.lidar_target, omega_anchor = degenerate_anchor(
             lidar.pose, matrix(prev.pose) @ wheel.corrected, lidar.basis, lidar.length,
             self.T_base_lidar, cfg.anchor_sigma,
             reference_covariance=from_gtsam_matrix(prev.cov_gtsam),
             reference_information=wheel.information,
-            min_information_ratio=cfg.anchor_min_information_ratio)
+            min_planar_share=cfg.anchor_min_planar_share)
         plan.lidar_information = plan.split.lidar + omega_anchor
         # the anchor is an absolute pseudo-measurement: the graph's marginal along the
         # subspace stops growing, so the wheel random walk is added to the reported one

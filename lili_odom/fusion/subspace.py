@@ -33,6 +33,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 
 from lili_odom.geometry import adjoint, exp, log, orthonormalize, scaling_matrix
 
@@ -46,7 +47,7 @@ __all__ = [
     "remap_pose",
     "weighted_restriction",
     "degenerate_anchor",
-    "measured_directions",
+    "planar_directions",
     "snap_basis",
     "covariance_along",
     "inflate_along",
@@ -285,7 +286,7 @@ def degenerate_anchor(
     reference_covariance: np.ndarray | None = None,
     iterations: int = 3,
     reference_information: np.ndarray | None = None,
-    min_information_ratio: float = 0.0,
+    min_planar_share: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A registration pose whose degenerate components are taken from a reference pose.
 
@@ -317,13 +318,12 @@ def degenerate_anchor(
             tunnel axis carries some roll, and without the weight 0.02 rad of roll
             disagreement moves the target by more than 5 cm along the axis
             (``test/test_fusion_prior_factor.py``).
-        min_information_ratio: with ``reference_information``, the target takes the
-            reference's components only along the directions of the subspace the reference
-            measures with at least this share of its best-measured translation's information
-            (:func:`measured_directions`) and keeps ``T_meas``'s along the rest; ``omega``
-            covers the whole subspace either way. A share, not an absolute information, so
-            the choice does not depend on the reference increment's length. 0 (default):
-            every direction from the reference.
+        min_planar_share: the target takes the reference's components only along the
+            directions of the subspace that are at least this share planar motion of
+            base_link (:func:`planar_directions`) and keeps ``T_meas``'s along the rest
+            (mostly height, roll and pitch, which planar wheel odometry does not measure);
+            ``omega`` covers the whole subspace either way. 0 (default): every direction from
+            the reference.
 
     Returns:
         ``(T_target, omega)``: ``T_meas`` moved along the degenerate subspace onto ``T_ref``'s
@@ -335,9 +335,8 @@ def degenerate_anchor(
     deg = orthonormal_rows(basis_scaled)
     weight = None if reference_information is None else M.T @ reference_information @ M
     moved = deg
-    if weight is not None and min_information_ratio > 0.0 and len(deg):
-        moved = _rows_measured(deg, weight,
-                               min_information_ratio * _best_translation(reference_information))
+    if min_planar_share > 0.0 and len(deg):
+        moved = planar_directions(deg, length, T_base_lidar, min_planar_share)
     T_target = np.asarray(T_meas, dtype=float)
     if len(moved):
         T_target = remap_pose(T_target @ T_base_lidar,
@@ -350,38 +349,28 @@ def degenerate_anchor(
     return T_target, 0.5 * (omega + omega.T)
 
 
-def measured_directions(basis_scaled: np.ndarray, information: np.ndarray, length: float,
-                        T_base_lidar: np.ndarray, min_ratio: float) -> np.ndarray:
-    """Orthonormal rows (m, 6, scaled LiDAR twists) spanning the directions of the subspace
-    ``basis_scaled`` (k, 6) along which ``information`` (6x6 ``(v, w)`` base_link, e.g. a
-    wheel increment's) is at least ``min_ratio`` times the information of its best-measured
-    base_link translation: the eigenvectors of the information restricted to the subspace,
-    m <= k.
+#: base_link twist components ``(v, w)`` of planar motion: x, y and yaw
+_PLANAR = np.diag([1.0, 1.0, 0.0, 0.0, 0.0, 1.0])
 
-    A detected direction that is mostly roll or pitch about a distant axis carries a little
-    lateral or vertical translation; wheels measure it through that translation alone. The
-    share does not change with the increment's length when, as for wheels, every sigma grows
-    with the distance travelled."""
+
+def planar_directions(basis_scaled: np.ndarray, length: float, T_base_lidar: np.ndarray,
+                      min_share: float) -> np.ndarray:
+    """Orthonormal rows (m, 6, scaled LiDAR twists) spanning the directions of the subspace
+    ``basis_scaled`` (k, 6) that are at least ``min_share`` planar motion of base_link: the
+    share of x, y and yaw in the direction as a scaled base_link twist ``(v, L w)``
+    (the generalised eigenvectors of the subspace, m <= k).
+
+    A detected direction of travel or a yaw is planar motion, which wheel odometry measures;
+    a roll about a distant axis (a corridor's floor edge) carries only a little lateral
+    translation, and height, roll and pitch are what it does not measure. The share depends
+    on the geometry alone, not on how long the wheel increment is."""
     deg = orthonormal_rows(basis_scaled)
     if not len(deg):
         return deg
-    M = scaled_lidar_to_base(T_base_lidar, length)
-    information = np.asarray(information, dtype=float)
-    return _rows_measured(deg, M.T @ information @ M,
-                          min_ratio * _best_translation(information))
-
-
-def _best_translation(information: np.ndarray) -> float:
-    """Largest eigenvalue of the translation block of a 6x6 ``(v, w)`` information [1/m^2]."""
-    block = np.asarray(information, dtype=float)[:3, :3]
-    return float(np.linalg.eigvalsh(0.5 * (block + block.T)).max())
-
-
-def _rows_measured(deg: np.ndarray, weight: np.ndarray, min_information: float) -> np.ndarray:
-    """The eigenvectors (rows) of ``weight`` (6x6, scaled twists) restricted to the orthonormal
-    rows ``deg`` with eigenvalue at least ``min_information``."""
-    lam, U = np.linalg.eigh(deg @ (0.5 * (weight + weight.T)) @ deg.T)
-    return U[:, lam >= min_information].T @ deg
+    # scaled base_link twist (v, L w) of each row
+    B = scaling_matrix(length) @ scaled_lidar_to_base(T_base_lidar, length) @ deg.T
+    share, C = scipy.linalg.eigh(B.T @ _PLANAR @ B, B.T @ B)
+    return orthonormal_rows(C[:, share >= min_share].T @ deg)
 
 
 def covariance_along(cov_base: np.ndarray, basis_scaled: np.ndarray, length: float,
