@@ -77,7 +77,7 @@ class LidarNoiseConfig:
             registration's own. A detected roll about a distant axis (a corridor's floor
             edge) carries a little lateral translation: fitted to the wheels through it alone,
             the prior's target would move sideways by their lateral error, amplified.
-            0 (default): every direction from the wheel prediction.
+            Default 0.5; 0: every direction from the wheel prediction.
         subspace_information: keep the LiDAR's own information inside the detected degenerate
             subspace (a prior at the registration refined there by point-to-plane
             Gauss-Newton, weighted by its Hessian; :mod:`lili_odom.pipeline.plane_refinement`)
@@ -100,7 +100,7 @@ class LidarNoiseConfig:
     robust_after_updates: int = 20
     factor: str = "hybrid"
     anchor_sigma: float = 0.05
-    anchor_min_planar_share: float = 0.0
+    anchor_min_planar_share: float = 0.5
     basis_snap: float = 0.0
     subspace_information: bool = True
     subspace_min_information: float = 1.0
