@@ -11,8 +11,8 @@ from lili_odom.fusion.config import LidarNoiseConfig
 from lili_odom.fusion.estimator import SubspaceMeasurement
 from lili_odom.fusion.subspace import (
     degenerate_anchor,
-    planar_directions,
     orthonormal_rows,
+    planar_directions,
     scaled_lidar_to_base,
     snap_basis,
 )
@@ -98,6 +98,9 @@ def test_planar_directions_keep_travel_and_yaw_and_drop_a_roll_about_a_floor_edg
                              mount, 0.5).shape == (0, 6)
     assert len(planar_directions(np.vstack([travel, ROLL_ABOUT_EDGE]), length, mount,
                                  0.0)) == 2
+    # a non-finite basis leaves the choice to the caller: every direction
+    assert len(planar_directions(np.vstack([travel, ROLL_ABOUT_EDGE]), np.nan, mount,
+                                 0.5)) == 2
 
 
 @pytest.mark.parametrize("with_subspace", [False, True])
