@@ -364,7 +364,7 @@ def planar_directions(basis_scaled: np.ndarray, length: float, T_base_lidar: np.
     a roll about a distant axis (a corridor's floor edge) carries only a little lateral
     translation, and height, roll and pitch are what it does not measure. The share depends
     on the geometry alone, not on how long the wheel increment is. A non-finite length or
-    mount gives the whole subspace back."""
+    mount, or a numerically singular subspace, gives the whole subspace back."""
     deg = orthonormal_rows(basis_scaled)
     if not len(deg):
         return deg
@@ -373,7 +373,10 @@ def planar_directions(basis_scaled: np.ndarray, length: float, T_base_lidar: np.
         B = scaling_matrix(length) @ scaled_lidar_to_base(T_base_lidar, length) @ deg.T
     if not np.all(np.isfinite(B)):
         return deg
-    share, C = scipy.linalg.eigh(B.T @ _PLANAR @ B, B.T @ B)
+    try:
+        share, C = scipy.linalg.eigh(B.T @ _PLANAR @ B, B.T @ B)
+    except (np.linalg.LinAlgError, ValueError):  # numerically singular: keep every direction
+        return deg
     return orthonormal_rows(C[:, share >= min_share].T @ deg)
 
 
