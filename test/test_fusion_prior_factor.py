@@ -98,7 +98,7 @@ def test_planar_directions_keep_travel_and_yaw_and_drop_a_roll_about_a_floor_edg
                              mount, 0.5).shape == (0, 6)
     assert len(planar_directions(np.vstack([travel, ROLL_ABOUT_EDGE]), length, mount,
                                  0.0)) == 2
-    # a non-finite basis leaves the choice to the caller: every direction
+    # a non-finite characteristic length gives every direction back
     assert len(planar_directions(np.vstack([travel, ROLL_ABOUT_EDGE]), np.nan, mount,
                                  0.5)) == 2
 
