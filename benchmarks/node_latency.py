@@ -55,10 +55,13 @@ FIRST_SCANS = 10
 
 
 def play_job(bag: Path, method: str = "lili", rate: float = 1.0,
-             duration: float = DEFAULT_PIECE[2]) -> dict[str, Any]:
+             duration: float = DEFAULT_PIECE[2],
+             parameters: dict[str, Any] | None = None) -> dict[str, Any]:
     """The :func:`benchmarks.faults.worker_play` job: ``bag`` at ``rate`` with stamps moved
-    onto the system clock, no ``/clock``, the node with ``pipeline.method`` = ``method``."""
+    onto the system clock, no ``/clock``, the node with ``pipeline.method`` = ``method`` and
+    ``parameters`` (node parameters by their dotted names) on top of the defaults."""
     return {"method": method, "rate": rate, "bag": str(bag),
+            "parameters": dict(parameters or {}),
             "play_args": ["--restamp", "--clock-hz", "0"],
             "play_timeout": max(600.0, 3.0 * duration / max(rate, 1e-3))}
 
@@ -95,8 +98,10 @@ def evaluate(row: dict[str, Any], resolution: str) -> dict[str, Any]:
 
 def benchmark(bags: dict[str, Path], method: str = "lili", rate: float = 1.0,
               duration: float = DEFAULT_PIECE[2], timeout: float = 1800.0,
-              progress: bool = True) -> dict[str, Any]:
-    """One play run per bag (``{"ROWSxCOLS": bag}``), each in a fresh worker process."""
+              progress: bool = True, parameters: dict[str, Any] | None = None
+              ) -> dict[str, Any]:
+    """One play run per bag (``{"ROWSxCOLS": bag}``), each in a fresh worker process, the
+    node with ``parameters`` on top of the defaults."""
     meter = LoadMeter()
     rows: dict[str, Any] = {}
     for res, bag in bags.items():
@@ -106,7 +111,8 @@ def benchmark(bags: dict[str, Path], method: str = "lili", rate: float = 1.0,
         b0, _ = _cpu_busy_jiffies()
         c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         w0 = time.monotonic()
-        r = run_in_subprocess("play", play_job(bag, method, rate, duration), timeout)
+        r = run_in_subprocess("play", play_job(bag, method, rate, duration, parameters),
+                              timeout)
         row = {k: r[k] for k in KEPT if k in r}
         row["bag"] = Path(bag).name
         row["subscriber"] = received_summary(row.get("received_latency_s", []))
@@ -120,6 +126,7 @@ def benchmark(bags: dict[str, Path], method: str = "lili", rate: float = 1.0,
                   f"{_ms(row.get('latency_p99_s'))} / max {_ms(row.get('latency_max_s'))} ms",
                   flush=True)
     return {"machine": machine_info(), "method": method, "rate": rate,
+            "parameters": dict(parameters or {}),
             "target_p99_s": TARGET_P99_S, "target_resolution": TARGET_RESOLUTION,
             "load": meter.report(),
             "resolutions": rows}
@@ -210,6 +217,24 @@ def markdown(report: dict[str, Any], command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def parse_parameters(ap: argparse.ArgumentParser, items: list[str]) -> dict[str, Any]:
+    """``KEY=VALUE`` items as node parameters (values read as YAML scalars: 16, 1.5, true);
+    an item without ``=`` or a key that is not a node parameter is a usage error."""
+    import yaml
+
+    from lili_odom.config import NodeConfig, flatten
+
+    known = flatten(NodeConfig())
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        key = key.strip()
+        if not sep or key not in known:
+            ap.error(f"--set expects KEY=VALUE with a node parameter as KEY, got {item!r}")
+        out[key] = yaml.safe_load(value)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_piece_arguments(ap)
@@ -220,13 +245,17 @@ def main(argv=None) -> int:
                     help="directory for the results (default benchmarks/results)")
     ap.add_argument("--name", default="node_latency",
                     help="file name of the results without .md/.json (default node_latency)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a node parameter on top of the defaults (e.g. "
+                         "pipeline.detection_schedule.max_reuse=16); repeatable")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
     if not args.rate > 0:
         ap.error("--rate must be positive")
+    parameters = parse_parameters(ap, args.set)
     scenario, bags = piece_bags(ap, args, progress=not args.no_progress)
     report = benchmark(bags, args.method, args.rate, args.duration, args.timeout,
-                       progress=not args.no_progress)
+                       progress=not args.no_progress, parameters=parameters)
     report["piece"] = {"scenario": scenario.name, "start_s": args.start,
                        "duration_s": args.duration, "seed": args.seed}
     report["suite_resolutions"] = {format_resolution(r): names
@@ -235,6 +264,7 @@ def main(argv=None) -> int:
         "benchmarks.node_latency", args,
         (f" --method {args.method}" if args.method != "lili" else "")
         + (f" --rate {args.rate:g}" if args.rate != 1.0 else "")
+        + "".join(f" --set {item}" for item in args.set)
         + (f" --name {args.name}" if args.name != "node_latency" else ""))
     path = write_results(args.out, args.name, markdown(report, command), report)
     print(f"wrote {path}")

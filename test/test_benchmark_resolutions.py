@@ -2,6 +2,8 @@
 figures and reports from synthetic runs (no simulation, no timing)."""
 from __future__ import annotations
 
+import argparse
+
 import pytest
 
 from benchmarks import node_latency as nl
@@ -129,6 +131,16 @@ def test_speed_report_has_a_row_and_a_verdict_per_resolution():
 def test_node_latency_targets_and_report():
     job = nl.play_job("some/bag", rate=1.0, duration=30.0)
     assert "--restamp" in job["play_args"] and job["play_timeout"] >= 600
+    assert job["parameters"] == {}
+    ap = argparse.ArgumentParser()
+    params = nl.parse_parameters(ap, ["pipeline.detection_schedule.max_reuse=16",
+                                      "pipeline.detection_schedule.reuse_distance_m=1.5"])
+    assert params == {"pipeline.detection_schedule.max_reuse": 16,
+                      "pipeline.detection_schedule.reuse_distance_m": 1.5}
+    assert nl.play_job("some/bag", parameters=params)["parameters"] == params
+    for bad in (["no_such.parameter=1"], ["pipeline.detection_schedule.max_reuse"]):
+        with pytest.raises(SystemExit):
+            nl.parse_parameters(ap, bad)
     ok = {"status": "ok", "nothing_lost": 1, "published": 300, "received": 300,
           "processed": 300, "dropped": 0, "missing": 0, "odometry": 300,
           "latency_p50_s": 0.05, "latency_p99_s": 0.09, "latency_max_s": 0.12,
