@@ -218,21 +218,25 @@ def markdown(report: dict[str, Any], command: str) -> str:
 
 
 def parse_parameters(ap: argparse.ArgumentParser, items: list[str]) -> dict[str, Any]:
-    """``KEY=VALUE`` items as node parameters (values read as YAML scalars: 16, 1.5, true);
-    an item without ``=`` or a key that is not a node parameter is a usage error."""
+    """``KEY=VALUE`` items as node parameters, each converted to its parameter's type and
+    checked as a parameter file's are (:func:`lili_odom.config.apply_params`; values read as
+    YAML scalars: 16, 1.5, true). An item without ``=``, an unknown key or a bad value is a
+    usage error."""
     import yaml
 
-    from lili_odom.config import NodeConfig, flatten
+    from lili_odom.config import NodeConfig, apply_params, flatten
 
-    known = flatten(NodeConfig())
-    out: dict[str, Any] = {}
+    raw: dict[str, Any] = {}
     for item in items:
         key, sep, value = item.partition("=")
-        key = key.strip()
-        if not sep or key not in known:
-            ap.error(f"--set expects KEY=VALUE with a node parameter as KEY, got {item!r}")
-        out[key] = yaml.safe_load(value)
-    return out
+        if not sep or not key.strip():
+            ap.error(f"--set expects KEY=VALUE, got {item!r}")
+        raw[key.strip()] = yaml.safe_load(value)
+    try:
+        values = flatten(apply_params(NodeConfig(), raw))
+    except ValueError as exc:
+        ap.error(f"--set: {exc}")
+    return {key: values[key] for key in raw}
 
 
 def main(argv=None) -> int:

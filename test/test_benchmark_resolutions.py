@@ -134,11 +134,15 @@ def test_node_latency_targets_and_report():
     assert job["parameters"] == {}
     ap = argparse.ArgumentParser()
     params = nl.parse_parameters(ap, ["pipeline.detection_schedule.max_reuse=16",
-                                      "pipeline.detection_schedule.reuse_distance_m=1.5"])
+                                      "pipeline.detection_schedule.reuse_distance_m=2"])
     assert params == {"pipeline.detection_schedule.max_reuse": 16,
-                      "pipeline.detection_schedule.reuse_distance_m": 1.5}
+                      "pipeline.detection_schedule.reuse_distance_m": 2.0}
+    # the node declares a float parameter as DOUBLE: an integer written for it becomes a float
+    assert isinstance(params["pipeline.detection_schedule.reuse_distance_m"], float)
     assert nl.play_job("some/bag", parameters=params)["parameters"] == params
-    for bad in (["no_such.parameter=1"], ["pipeline.detection_schedule.max_reuse"]):
+    for bad in (["no_such.parameter=1"], ["pipeline.detection_schedule.max_reuse"],
+                ["pipeline.detection_schedule.max_reuse=1.5"],
+                ["pipeline.detection_schedule.reuse_distance_m=-1"]):
         with pytest.raises(SystemExit):
             nl.parse_parameters(ap, bad)
     ok = {"status": "ok", "nothing_lost": 1, "published": 300, "received": 300,
