@@ -684,7 +684,8 @@ class OdometryPipeline:
         self._collect_background(seq)
         screened = self._screen(source, pose, planes)
         if screened is not None:
-            self.counters["detections_screened"] += 1
+            self.counters["detections_screened_weak" if screened.degenerate
+                          else "detections_screened"] += 1
             self._schedule.screened(screened)
             return screened
         worker = self._worker
@@ -710,7 +711,9 @@ class OdometryPipeline:
                 planes: PlaneFitCache) -> DegeneracyResult | None:
         """A not-degenerate result for the scan registered at ``pose`` when its point-to-plane
         planes hold every direction with at least ``plane_refinement.clear_information``
-        (``screen_detections``), else None (the detector decides).
+        (``screen_detections``); with ``screen_weak_information`` > 0, when they hold every
+        direction with at least that, a result whose subspace is the directions held with
+        less than ``clear_information``; else None (the detector decides).
 
         The information is the debiased point-to-plane information of the registration over
         all six scaled twists (characteristic length of ``source``, as the detectors scale),
@@ -728,11 +731,16 @@ class OdometryPipeline:
         if not (full.ok and np.all(np.isfinite(full.information))):
             return None
         self._screen_information = (full.information, length)
-        weakest = float(np.linalg.eigvalsh(full.information)[0])
+        w, V = np.linalg.eigh(0.5 * (full.information + full.information.T))
+        weakest = float(w[0])
         if weakest < cfg.clear_information:
-            return None
+            if not 0 < cfg.screen_weak_information <= weakest:
+                return None
+            basis = V[:, w < cfg.clear_information].T  # scaled twists, orthonormal rows
+        else:
+            basis = np.zeros((0, 6))
         return DegeneracyResult(method=self._detector.name, pose=np.asarray(pose, dtype=float),
-                                basis_scaled=np.zeros((0, 6)), characteristic_length=length,
+                                basis_scaled=basis, characteristic_length=length,
                                 details={"screened": True, "min_information": weakest})
 
     def _registration_information(self) -> np.ndarray | None:

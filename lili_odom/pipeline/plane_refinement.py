@@ -149,6 +149,14 @@ class PlaneRefinementConfig:
             use anyway): such a scan counts as constrained, since every direction a detection
             could flag there would be cleared again. Default True; False runs the detector
             (or carries a detection over) on every scan.
+        screen_weak_information: a scan whose planes hold every direction with at least
+            this information [1/m^2], but some with less than ``clear_information``, does not
+            run the detector either (``screen_detections``): its degenerate subspace is the
+            directions the planes hold with less than ``clear_information`` (eigenvectors of
+            the screen's information), each then held with its own information like a
+            detected one (``held_information``). The detector is asked only where the planes
+            leave some direction nearly free. 0 = never (the detector decides every scan the
+            screen does not pass). Default 0.
         weigh_registration: the fusion weighs a scan's registration by the screen's
             point-to-plane information too, on scans where the screen ran: the covariance
             of the configured LiDAR sigmas (``fusion.lidar``) plus the planes'
@@ -255,6 +263,7 @@ class PlaneRefinementConfig:
     constrained_settle_m: float = 0.02
     constrained_from_prediction: bool = False
     screen_detections: bool = True
+    screen_weak_information: float = 0.0
     weigh_registration: bool = False
     predicted_start: bool = True
     return_check: str = "prediction"
@@ -295,6 +304,8 @@ class PlaneRefinementConfig:
         check_range(prefix + "min_along_information", self.min_along_information, 0.0, 1e12)
         check_range(prefix + "clear_information", self.clear_information, 0.0, 1e12)
         check_range(prefix + "held_information", self.held_information, 0.0, None)
+        check_range(prefix + "screen_weak_information", self.screen_weak_information, 0.0,
+                    1e12)
         check_range(prefix + "information_without_wheels", self.information_without_wheels,
                     0.0, 1.0)
         check_range(prefix + "constrained_information", self.constrained_information, 0.0,
