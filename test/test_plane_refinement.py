@@ -239,6 +239,43 @@ def test_a_scan_its_planes_hold_in_every_direction_skips_the_detector():
     assert off._screen(scan, here, planes(off, scan)) is None
 
 
+def test_planes_that_hold_every_direction_weakly_give_the_subspace_themselves():
+    """With ``screen_weak_information`` the planes give the subspace (their directions below
+    ``clear_information``) where they hold every direction with at least that; below it,
+    or with it off, the detector decides."""
+    room = corridor(12.0, end_walls=True)
+    here, scan = pose_at(6.0), scan_at(room, 6.0)
+    probe = _pipeline_over(room, 5.9)
+    probe._detector = _NoDetector()
+    probe._screen(scan, here, planes(probe, scan))
+    w, V = np.linalg.eigh(probe._screen_information[0])
+    assert w[0] > 0 and w[2] > w[1] * 1.01  # a clear gap after the second direction
+
+    pipeline = _pipeline_over(room, 5.9)
+    pipeline._detector = _NoDetector()
+    cfg = pipeline.config.plane_refinement
+    cfg.clear_information = 0.5 * (w[1] + w[2])  # the room holds two directions below it
+    cfg.screen_weak_information = 0.5 * w[0]
+    result = pipeline._detection(scan, here, here, planes(pipeline, scan))
+    assert result.ok and result.degenerate and result.details["screened"]
+    assert result.dimension == 2 and np.isclose(result.details["min_information"], w[0])
+    np.testing.assert_allclose(np.abs(result.basis_scaled @ V[:, :2]), np.eye(2), atol=1e-6)
+    assert pipeline.counters["detections_screened_weak"] == 1
+    assert pipeline.counters["detections"] == pipeline.counters["detections_screened"] == 0
+    from lili_odom.pipeline.odometry import _screened_here
+    assert not _screened_here(result)  # the later checks treat it as a detection
+
+    cfg.screen_weak_information = 2.0 * w[0]  # the weakest direction is nearly free
+    assert pipeline._screen(scan, here, planes(pipeline, scan)) is None
+    cfg.screen_weak_information = 0.0
+    assert pipeline._screen(scan, here, planes(pipeline, scan)) is None
+    tube = corridor(200.0, end_walls=False)  # nothing holds the axis: the detector decides
+    open_ended = _pipeline_over(tube, 99.9)
+    open_ended.config.plane_refinement.screen_weak_information = 100.0
+    tube_scan = scan_at(tube, 100.0)
+    assert open_ended._screen(tube_scan, pose_at(100.0), planes(open_ended, tube_scan)) is None
+
+
 def test_the_screen_weighs_the_registration_for_the_fusion():
     """With ``weigh_registration`` the fusion gets the screen's information combined with
     the configured sigmas; without it (or before a screen) the configured sigmas."""
