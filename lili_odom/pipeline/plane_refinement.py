@@ -156,7 +156,8 @@ class PlaneRefinementConfig:
             the screen's information), each then held with its own information like a
             detected one (``held_information``). The detector is asked only where the planes
             leave some direction nearly free. 0 = never (the detector decides every scan the
-            screen does not pass). Default 0.
+            screen does not pass). Default 30 (an 18 cm sigma; ``docs/performance.md``,
+            "Planes that hold every direction").
         weigh_registration: the fusion weighs a scan's registration by the screen's
             point-to-plane information too, on scans where the screen ran: the covariance
             of the configured LiDAR sigmas (``fusion.lidar``) plus the planes'
@@ -263,7 +264,7 @@ class PlaneRefinementConfig:
     constrained_settle_m: float = 0.02
     constrained_from_prediction: bool = False
     screen_detections: bool = True
-    screen_weak_information: float = 0.0
+    screen_weak_information: float = 30.0
     weigh_registration: bool = False
     predicted_start: bool = True
     return_check: str = "prediction"
