@@ -53,9 +53,12 @@ def test_ci_preset_lili_beats_none_and_wheels(tmp_path):
         assert 0.0 <= lili["degenerate_fraction"] <= 1.0 and lili["scans_per_s"] > 0
         assert wheels["degenerate_fraction"] is None
         assert (out / f"{name}.png").stat().st_size > 10_000
-        # the job ran the odometry as `lili-odom run` does: detections in the background
-        metrics = next((out / "runs" / name).glob("seed*/lili/metrics.json"))
-        assert json.loads(metrics.read_text())["counters"]["detections_background"] > 0
+    # the jobs ran the odometry as `lili-odom run` does: detections in the background (where
+    # LiLi is asked at all: the planes give the subspace where they hold every direction)
+    background = [json.loads(next((out / "runs" / name).glob("seed*/lili/metrics.json"))
+                             .read_text())["counters"].get("detections_background", 0)
+                  for name in CI]
+    assert max(background) > 0, background
     md = (out / "suite.md").read_text()
     assert "lili-odom suite --preset ci" in md
     for name in CI:
