@@ -137,8 +137,9 @@ class PlaneRefinementConfig:
             constrained rather than degenerate (``OdometryOutput.weak_basis``, not
             ``degenerate_basis``): the LiDAR holds it, and the fusion takes it with that
             weight either way, so this only sets what the outputs call degenerate. Default
-            100 (a 10 cm sigma, as ``min_along_information``); 1e12: every direction of the
-            subspace is reported as degenerate.
+            30 (an 18 cm sigma), the bar of ``screen_weak_information``: a direction the
+            planes hold well enough to skip the detector is not called degenerate either;
+            1e12: every direction of the subspace is reported as degenerate.
         information_without_wheels: factor on the subspace information the fusion gets
             from the refinement on a scan without wheel data (dimensionless, 0..1); default
             1 (the measured information). Below 1 the fusion leans on the IMU along weakly
@@ -190,8 +191,8 @@ class PlaneRefinementConfig:
             without wheel data for longer, or ever, the LiDAR keeps its information (on open
             ground it is all that holds the direction of travel). Default 30.
         return_offset: how far the ``offset`` return check moves the result [m, scaled
-            twist: a rotation of ``return_offset / L`` rad]; default 0.1 (the 10 cm of
-            ``held_information``).
+            twist: a rotation of ``return_offset / L`` rad]; default 0.1 (the 10 cm sigma
+            of ``min_along_information``).
         max_return_ratio: the share of the distance moved (the offset, or the registration
             to the prediction) a refinement must come back by for the direction to count as
             held (dimensionless, 0..1); default 0.5.
@@ -256,7 +257,7 @@ class PlaneRefinementConfig:
     weak_information: float = 1000.0
     min_along_information: float = 100.0
     clear_information: float = 1000.0
-    held_information: float = 100.0
+    held_information: float = 30.0
     information_without_wheels: float = 1.0
     refine_constrained: str = "planar"
     constrained_information: float = 1000.0
