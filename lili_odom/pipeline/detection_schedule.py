@@ -11,9 +11,10 @@ one with the adjoint of the relative pose and re-orthonormalised in the scaled s
 
 ``max_reuse = 0`` runs the detector on every scan (the paper's setting).
 
-A scan the odometry finds constrained without the detector (``screened``: its point-to-plane
-planes hold every direction, :class:`lili_odom.pipeline.plane_refinement.PlaneRefinementConfig`
-``screen_detections``) does not run it; it becomes the result carried over while the next
+A scan whose point-to-plane planes hold every direction (``screened``:
+:class:`lili_odom.pipeline.plane_refinement.PlaneRefinementConfig` ``screen_detections``,
+constrained, or with ``screen_weak_information`` the planes' own subspace of weakly held
+directions) does not run the detector; its result becomes the one carried over while the next
 detection is computed once the last detection is out of reach, but is never reused itself.
 
 In the *background* (``background``, default), a detection that is due runs in a process of
@@ -169,11 +170,11 @@ class DetectionSchedule:
         return carry_over(self._last, pose, self._age)
 
     def screened(self, result: DegeneracyResult) -> None:
-        """A scan found constrained without the detector (``result``: not degenerate, at the
-        scan's pose). It replaces the last detection once that one can no longer serve this
-        pose, as what is carried over (``stale``) while the next detection is computed, but
-        is never reused in place of one: the next scan the screen does not pass is
-        detected."""
+        """A scan the screen decided without the detector (``result``, at the scan's pose:
+        not degenerate, or the planes' subspace). It replaces the last detection once that
+        one can no longer serve this pose, as what is carried over (``stale``) while the next
+        detection is computed, but is never reused in place of one: the next scan the screen
+        does not pass is detected."""
         if not self._within_reach(result.pose):
             self._last, self._age = result, self.config.max_reuse
 

@@ -1182,8 +1182,9 @@ class OdometryPipeline:
 
 
 def _screened_here(degeneracy: DegeneracyResult) -> bool:
-    """True for this scan's own screen result (:meth:`OdometryPipeline._screen`), not one
-    carried over from an earlier scan nor merged with a held subspace."""
+    """True for this scan's own screen result that found every direction held
+    (:meth:`OdometryPipeline._screen`), not the planes' subspace of weakly held directions, not
+    one carried over from an earlier scan nor merged with a held subspace."""
     d = degeneracy.details
     return bool(d.get("screened")) and not (d.get("reused") or d.get("held")
                                             or len(degeneracy.basis_scaled))
