@@ -276,6 +276,55 @@ def test_planes_that_hold_every_direction_weakly_give_the_subspace_themselves():
     assert open_ended._screen(tube_scan, pose_at(100.0), planes(open_ended, tube_scan)) is None
 
 
+def test_the_planes_subspace_can_skip_the_remapping_and_the_checks(monkeypatch):
+    """``remap_screened_subspace`` and ``check_screened_subspace`` False: a scan whose screen
+    gave the planes' subspace is neither remapped nor checked for weak or along-track
+    directions; the same subspace carried over to another scan still is."""
+    import lili_odom.pipeline.odometry as odometry
+
+    calls = []
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return refine_in_subspace(*args, **kwargs)
+
+    monkeypatch.setattr(odometry, "refine_in_subspace", counted)
+    room = corridor(12.0, end_walls=True)
+    pipeline = _pipeline_over(room, 5.9)
+    pipeline._detector = _NoDetector()
+    cfg = pipeline.config.plane_refinement
+    here, scan = pose_at(6.0), scan_at(room, 6.0)
+    fits = planes(pipeline, scan)
+    pipeline._screen(scan, here, fits)
+    w = np.linalg.eigvalsh(pipeline._screen_information[0])
+    cfg.clear_information = cfg.weak_information = cfg.constrained_information = w[1] * 1.001
+    cfg.screen_weak_information = 0.5 * w[0]
+    result = pipeline._screen(scan, here, fits)
+    assert result.ok and result.dimension == 2
+    behind = pose_at(5.9)
+    behind[1, 3] = 0.1  # travel across the room, which the side walls hold well
+    carried = replace(result, details={**result.details, "reused": True})
+    assert pipeline._remaps(result) and pipeline._remaps(carried)
+    calls.clear()
+    pipeline._weak_directions(fits, here, behind, result)
+    pipeline._along_track(fits, here, behind, result)
+    assert len(calls) == 2  # checked by default
+
+    cfg.remap_screened_subspace = cfg.check_screened_subspace = False
+    assert not pipeline._remaps(result) and pipeline._remaps(carried)
+    calls.clear()
+    assert pipeline._weak_directions(fits, here, behind, result) is None
+    assert pipeline._along_track(fits, here, behind, result) is None
+    assert not calls
+    pipeline._weak_directions(fits, here, behind, carried)
+    pipeline._along_track(fits, here, behind, carried)
+    assert len(calls) == 2
+    cfg.weak_information = cfg.clear_information * 2  # outside the subspace may be weaker
+    calls.clear()
+    pipeline._weak_directions(fits, here, behind, result)
+    assert len(calls) == 1
+
+
 def test_the_screen_weighs_the_registration_for_the_fusion():
     """With ``weigh_registration`` the fusion gets the screen's information combined with
     the configured sigmas; without it (or before a screen) the configured sigmas."""

@@ -798,9 +798,14 @@ class OdometryPipeline:
         self._schedule.record(result, age=seq - pending)
 
     def _remaps(self, degeneracy: DegeneracyResult | None) -> bool:
-        """Solution remapping applies: a degenerate detection and ``remap_iterations`` > 0."""
-        return bool(self.config.remap_iterations and degeneracy is not None and degeneracy.ok
-                    and degeneracy.degenerate)
+        """Solution remapping applies: a degenerate detection, ``remap_iterations`` > 0, and
+        not the planes' subspace of this scan's screen when
+        ``plane_refinement.remap_screened_subspace`` is False."""
+        if not (self.config.remap_iterations and degeneracy is not None and degeneracy.ok
+                and degeneracy.degenerate):
+            return False
+        return (self.config.plane_refinement.remap_screened_subspace
+                or not _screen_result_here(degeneracy))
 
     def _remap(self, source: np.ndarray, registered: np.ndarray, wheel: np.ndarray | None,
                degeneracy: DegeneracyResult) -> np.ndarray:
@@ -980,6 +985,9 @@ class OdometryPipeline:
             return None
         if _screened_here(degeneracy) and degeneracy.details["min_information"] >= limit:
             return None  # every direction, so every planar one, holds at least that here
+        if (not cfg.check_screened_subspace and _screen_result_here(degeneracy)
+                and cfg.clear_information >= limit):
+            return None  # every direction outside the planes' subspace holds that here
         B = degeneracy.basis_scaled
         length = degeneracy.characteristic_length
         C = self._outside(degeneracy, planar=True)
@@ -1027,6 +1035,10 @@ class OdometryPipeline:
         if (cfg.refine_constrained != "off" and _screened_here(degeneracy)
                 and degeneracy.details["min_information"] >= cfg.constrained_information):
             return None  # every direction holds: the constrained refinement takes the step
+        if (cfg.refine_constrained != "off" and not cfg.check_screened_subspace
+                and _screen_result_here(degeneracy)
+                and cfg.clear_information >= cfg.constrained_information):
+            return None  # so does every direction outside the planes' subspace
         travel = pose[:3, :3].T @ self._travel(guess)
         n = float(np.linalg.norm(travel))
         if n < cfg.min_travel_m:
@@ -1181,10 +1193,16 @@ class OdometryPipeline:
         return np.concatenate([v, w])
 
 
+def _screen_result_here(degeneracy: DegeneracyResult) -> bool:
+    """True for this scan's own screen result (:meth:`OdometryPipeline._screen`), with or
+    without the planes' subspace, not one carried over from an earlier scan nor merged with
+    a held subspace."""
+    d = degeneracy.details
+    return bool(d.get("screened")) and not (d.get("reused") or d.get("held"))
+
+
 def _screened_here(degeneracy: DegeneracyResult) -> bool:
     """True for this scan's own screen result that found every direction held
     (:meth:`OdometryPipeline._screen`), not the planes' subspace of weakly held directions, not
     one carried over from an earlier scan nor merged with a held subspace."""
-    d = degeneracy.details
-    return bool(d.get("screened")) and not (d.get("reused") or d.get("held")
-                                            or len(degeneracy.basis_scaled))
+    return _screen_result_here(degeneracy) and not len(degeneracy.basis_scaled)

@@ -159,6 +159,16 @@ class PlaneRefinementConfig:
             leave some direction nearly free. 0 = never (the detector decides every scan the
             screen does not pass). Default 30 (an 18 cm sigma; ``docs/performance.md``,
             "Planes that hold every direction").
+        remap_screened_subspace: solution remapping on a scan whose screen gave the planes'
+            subspace (``screen_weak_information``): the registration held at the wheels'
+            prediction along it before the refinement inside it. False: the refinement
+            starts at the registration, which the planes hold in every direction. Default
+            True.
+        check_screened_subspace: the weak-direction and along-track checks
+            (``weak_information``, ``along_track``) on a scan whose screen gave the planes'
+            subspace. False skips them: every direction outside that subspace is held with
+            at least ``clear_information``, which is what they test, and the constrained
+            refinement takes the step there. Default True.
         weigh_registration: the fusion weighs a scan's registration by the screen's
             point-to-plane information too, on scans where the screen ran: the covariance
             of the configured LiDAR sigmas (``fusion.lidar``) plus the planes'
@@ -266,6 +276,8 @@ class PlaneRefinementConfig:
     constrained_from_prediction: bool = False
     screen_detections: bool = True
     screen_weak_information: float = 30.0
+    remap_screened_subspace: bool = True
+    check_screened_subspace: bool = True
     weigh_registration: bool = False
     predicted_start: bool = True
     return_check: str = "prediction"
