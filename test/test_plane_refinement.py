@@ -277,7 +277,7 @@ def test_planes_that_hold_every_direction_weakly_give_the_subspace_themselves():
 
 
 def test_the_planes_subspace_can_skip_the_remapping_and_the_checks(monkeypatch):
-    """``remap_screened_subspace`` and ``check_screened_subspace`` False: a scan whose screen
+    """``screened_subspace_remap`` off and ``check_screened_subspace`` False: a scan whose screen
     gave the planes' subspace is neither remapped nor checked for weak or along-track
     directions; the same subspace carried over to another scan still is."""
     import lili_odom.pipeline.odometry as odometry
@@ -310,7 +310,7 @@ def test_the_planes_subspace_can_skip_the_remapping_and_the_checks(monkeypatch):
     pipeline._along_track(fits, here, behind, result)
     assert len(calls) == 2  # checked by default
 
-    cfg.remap_screened_subspace = cfg.check_screened_subspace = False
+    cfg.screened_subspace_remap, cfg.check_screened_subspace = "off", False
     assert not pipeline._remaps(result) and pipeline._remaps(carried)
     calls.clear()
     assert pipeline._weak_directions(fits, here, behind, result) is None
@@ -323,6 +323,20 @@ def test_the_planes_subspace_can_skip_the_remapping_and_the_checks(monkeypatch):
     calls.clear()
     pipeline._weak_directions(fits, here, behind, result)
     assert len(calls) == 1
+
+    # ``prediction``: the wheels' components along the subspace, no registration run again
+    from lili_odom.fusion.subspace import remap_pose
+
+    cfg.screened_subspace_remap = "prediction"
+    assert pipeline._remaps(result)
+    wheel = pose_at(6.3) @ np.linalg.inv(pipeline.T_base_lidar)
+    pipeline._matcher.step = lambda *a: pytest.fail("registered again")
+    moved = pipeline._remap(scan, here, wheel, result)
+    np.testing.assert_allclose(moved, remap_pose(here, pose_at(6.3), result.basis_scaled,
+                                                 result.characteristic_length))
+    assert pipeline.counters["remap_substituted"] == 1
+    with pytest.raises(ValueError, match="screened_subspace_remap"):
+        replace(cfg, screened_subspace_remap="wheels").validate()
 
 
 def test_the_screen_weighs_the_registration_for_the_fusion():

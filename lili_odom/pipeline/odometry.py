@@ -800,11 +800,11 @@ class OdometryPipeline:
     def _remaps(self, degeneracy: DegeneracyResult | None) -> bool:
         """Solution remapping applies: a degenerate detection, ``remap_iterations`` > 0, and
         not the planes' subspace of this scan's screen when
-        ``plane_refinement.remap_screened_subspace`` is False."""
+        ``plane_refinement.screened_subspace_remap`` is ``off``."""
         if not (self.config.remap_iterations and degeneracy is not None and degeneracy.ok
                 and degeneracy.degenerate):
             return False
-        return (self.config.plane_refinement.remap_screened_subspace
+        return (self.config.plane_refinement.screened_subspace_remap != "off"
                 or not _screen_result_here(degeneracy))
 
     def _remap(self, source: np.ndarray, registered: np.ndarray, wheel: np.ndarray | None,
@@ -812,7 +812,9 @@ class OdometryPipeline:
         """The registration held at the wheels' prediction ``wheel`` (base_link pose, odometry
         frame, :meth:`FusionEstimator.wheel_prediction`) along the degenerate subspace
         (solution remapping), ``T_odom_lidar``; the registration itself without wheel data
-        (``wheel`` None).
+        (``wheel`` None). On the planes' subspace of this scan's screen with
+        ``plane_refinement.screened_subspace_remap`` ``prediction``, the registration with
+        the prediction's components along the subspace, not run again.
 
         Only the wheels' prediction: the IMU's prediction carries the fused velocity, which a
         measurement held at it only confirms; the refinement inside the subspace then starts
@@ -824,6 +826,11 @@ class OdometryPipeline:
             self.counters["remap_without_wheels"] += 1
             return registered
         reference = wheel @ self.T_base_lidar
+        if (self.config.plane_refinement.screened_subspace_remap == "prediction"
+                and _screen_result_here(degeneracy)):
+            self.counters["remap_substituted"] += 1
+            return remap_pose(registered, reference, degeneracy.basis_scaled,
+                              degeneracy.characteristic_length)
         remapped = constrained_registration(
             lambda pose: self._matcher.step(source, pose), registered, reference,
             degeneracy.basis_scaled, degeneracy.characteristic_length,

@@ -57,6 +57,8 @@ MIN_TESTED_INFORMATION = 1.0
 
 #: Values of ``PlaneRefinementConfig.return_check``.
 RETURN_CHECKS = ("off", "prediction", "bounded", "offset")
+#: Values of ``PlaneRefinementConfig.screened_subspace_remap``.
+SCREENED_SUBSPACE_REMAPS = ("registration", "prediction", "off")
 
 #: Values of ``PlaneRefinementConfig.refine_constrained``.
 REFINE_CONSTRAINED = ("off", "all", "planar")
@@ -159,11 +161,14 @@ class PlaneRefinementConfig:
             leave some direction nearly free. 0 = never (the detector decides every scan the
             screen does not pass). Default 30 (an 18 cm sigma; ``docs/performance.md``,
             "Planes that hold every direction").
-        remap_screened_subspace: solution remapping on a scan whose screen gave the planes'
-            subspace (``screen_weak_information``): the registration held at the wheels'
-            prediction along it before the refinement inside it. False: the refinement
-            starts at the registration, which the planes hold in every direction. Default
-            True.
+        screened_subspace_remap: the solution remapping on a scan whose screen gave the
+            planes' subspace (``screen_weak_information``), before the refinement inside it:
+            ``registration`` (default; as on a detected subspace: the registration run again
+            held at the wheels' prediction along the subspace), ``prediction`` (the
+            registration with its components along the subspace replaced by the wheels'
+            prediction's, no registration run again: the constrained refinement that follows
+            measures the other directions on the planes) or ``off`` (the refinement starts
+            at the registration).
         check_screened_subspace: the weak-direction and along-track checks
             (``weak_information``, ``along_track``) on a scan whose screen gave the planes'
             subspace. False skips them: every direction outside that subspace is held with
@@ -276,7 +281,7 @@ class PlaneRefinementConfig:
     constrained_from_prediction: bool = False
     screen_detections: bool = True
     screen_weak_information: float = 30.0
-    remap_screened_subspace: bool = True
+    screened_subspace_remap: str = "registration"
     check_screened_subspace: bool = True
     weigh_registration: bool = False
     predicted_start: bool = True
@@ -337,6 +342,10 @@ class PlaneRefinementConfig:
         check_range(prefix + "line_neighbors", self.line_neighbors, 0, 1000)
         check_range(prefix + "min_sphericity", self.min_sphericity, 0.0, 1.0)
         check_range(prefix + "max_blob_spread", self.max_blob_spread, 0.0, 1.0)
+        if self.screened_subspace_remap not in SCREENED_SUBSPACE_REMAPS:
+            raise ValueError(f"{prefix}screened_subspace_remap must be one of "
+                             f"{', '.join(SCREENED_SUBSPACE_REMAPS)}, got "
+                             f"'{self.screened_subspace_remap}'")
         if self.return_check not in RETURN_CHECKS:
             raise ValueError(f"{prefix}return_check must be one of "
                              f"{', '.join(RETURN_CHECKS)}, got '{self.return_check}'")
