@@ -276,10 +276,8 @@ def test_planes_that_hold_every_direction_weakly_give_the_subspace_themselves():
     assert open_ended._screen(tube_scan, pose_at(100.0), planes(open_ended, tube_scan)) is None
 
 
-def test_the_planes_subspace_can_skip_the_remapping_and_the_checks(monkeypatch):
-    """``screened_subspace_remap`` off and ``check_screened_subspace`` False: a scan whose screen
-    gave the planes' subspace is neither remapped nor checked for weak or along-track
-    directions; the same subspace carried over to another scan still is."""
+def _count_refinements(monkeypatch) -> list:
+    """A list that gets an entry per call of the odometry's ``refine_in_subspace``."""
     import lili_odom.pipeline.odometry as odometry
 
     calls = []
@@ -289,6 +287,14 @@ def test_the_planes_subspace_can_skip_the_remapping_and_the_checks(monkeypatch):
         return refine_in_subspace(*args, **kwargs)
 
     monkeypatch.setattr(odometry, "refine_in_subspace", counted)
+    return calls
+
+
+def test_the_planes_subspace_can_skip_the_remapping_and_the_checks(monkeypatch):
+    """``screened_subspace_remap`` off and ``check_screened_subspace`` False: a scan whose screen
+    gave the planes' subspace is neither remapped nor checked for weak or along-track
+    directions; the same subspace carried over to another scan still is."""
+    calls = _count_refinements(monkeypatch)
     room = corridor(12.0, end_walls=True)
     pipeline = _pipeline_over(room, 5.9)
     pipeline._detector = _NoDetector()
@@ -363,15 +369,7 @@ def test_the_screen_weighs_the_registration_for_the_fusion():
 def test_a_screened_scan_passes_the_weak_check_without_computing_it_again(monkeypatch):
     from dataclasses import replace
 
-    import lili_odom.pipeline.odometry as odometry
-
-    calls = []
-
-    def counted(*args, **kwargs):
-        calls.append(1)
-        return refine_in_subspace(*args, **kwargs)
-
-    monkeypatch.setattr(odometry, "refine_in_subspace", counted)
+    calls = _count_refinements(monkeypatch)
     room = corridor(12.0, end_walls=True)
     pipeline = _pipeline_over(room, 5.9)
     pipeline._detector = _NoDetector()
