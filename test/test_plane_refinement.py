@@ -330,19 +330,8 @@ def test_the_planes_subspace_can_skip_the_remapping_and_the_checks(monkeypatch):
     pipeline._weak_directions(fits, here, behind, result)
     assert len(calls) == 1
 
-    # ``prediction``: the wheels' components along the subspace, no registration run again
-    from lili_odom.fusion.subspace import remap_pose
-
-    cfg.screened_subspace_remap = "prediction"
-    assert pipeline._remaps(result)
-    wheel = pose_at(6.3) @ np.linalg.inv(pipeline.T_base_lidar)
-    pipeline._matcher.step = lambda *a: pytest.fail("registered again")
-    moved = pipeline._remap(scan, here, wheel, result)
-    np.testing.assert_allclose(moved, remap_pose(here, pose_at(6.3), result.basis_scaled,
-                                                 result.characteristic_length))
-    assert pipeline.counters["remap_substituted"] == 1
     with pytest.raises(ValueError, match="screened_subspace_remap"):
-        replace(cfg, screened_subspace_remap="wheels").validate()
+        replace(cfg, screened_subspace_remap="prediction").validate()  # tried, removed
 
 
 def test_the_screen_weighs_the_registration_for_the_fusion():

@@ -34,6 +34,7 @@ Scan poses refer to the time of the scan's last point (KISS-ICP deskews to it).
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections import Counter
 from dataclasses import dataclass, field, replace
@@ -812,9 +813,7 @@ class OdometryPipeline:
         """The registration held at the wheels' prediction ``wheel`` (base_link pose, odometry
         frame, :meth:`FusionEstimator.wheel_prediction`) along the degenerate subspace
         (solution remapping), ``T_odom_lidar``; the registration itself without wheel data
-        (``wheel`` None). On the planes' subspace of this scan's screen with
-        ``plane_refinement.screened_subspace_remap`` ``prediction``, the registration with
-        the prediction's components along the subspace, not run again.
+        (``wheel`` None).
 
         Only the wheels' prediction: the IMU's prediction carries the fused velocity, which a
         measurement held at it only confirms; the refinement inside the subspace then starts
@@ -826,11 +825,6 @@ class OdometryPipeline:
             self.counters["remap_without_wheels"] += 1
             return registered
         reference = wheel @ self.T_base_lidar
-        if (self.config.plane_refinement.screened_subspace_remap == "prediction"
-                and _screen_result_here(degeneracy)):
-            self.counters["remap_substituted"] += 1
-            return remap_pose(registered, reference, degeneracy.basis_scaled,
-                              degeneracy.characteristic_length)
         remapped = constrained_registration(
             lambda pose: self._matcher.step(source, pose), registered, reference,
             degeneracy.basis_scaled, degeneracy.characteristic_length,
@@ -990,11 +984,8 @@ class OdometryPipeline:
             return None
         if float(np.linalg.norm(self._travel(guess))) < cfg.min_travel_m:
             return None
-        if _screened_here(degeneracy) and degeneracy.details["min_information"] >= limit:
-            return None  # every direction, so every planar one, holds at least that here
-        if (not cfg.check_screened_subspace and _screen_result_here(degeneracy)
-                and cfg.clear_information >= limit):
-            return None  # every direction outside the planes' subspace holds that here
+        if self._held_outside(degeneracy) >= limit:
+            return None  # every direction outside the subspace, so every planar one, holds it
         B = degeneracy.basis_scaled
         length = degeneracy.characteristic_length
         C = self._outside(degeneracy, planar=True)
@@ -1039,13 +1030,9 @@ class OdometryPipeline:
         cfg = self.config.plane_refinement
         if not (cfg.enabled and cfg.along_track):
             return None
-        if (cfg.refine_constrained != "off" and _screened_here(degeneracy)
-                and degeneracy.details["min_information"] >= cfg.constrained_information):
-            return None  # every direction holds: the constrained refinement takes the step
-        if (cfg.refine_constrained != "off" and not cfg.check_screened_subspace
-                and _screen_result_here(degeneracy)
-                and cfg.clear_information >= cfg.constrained_information):
-            return None  # so does every direction outside the planes' subspace
+        if (cfg.refine_constrained != "off"
+                and self._held_outside(degeneracy) >= cfg.constrained_information):
+            return None  # held outside the subspace: the constrained refinement steps there
         travel = pose[:3, :3].T @ self._travel(guess)
         n = float(np.linalg.norm(travel))
         if n < cfg.min_travel_m:
@@ -1070,6 +1057,20 @@ class OdometryPipeline:
         return _AlongTrack(False, pose, replace(degeneracy,
                                                 basis_scaled=np.vstack([B, direction]),
                                                 details=details))
+
+    def _held_outside(self, degeneracy: DegeneracyResult) -> float:
+        """The information [1/m^2, scaled] this scan's screen says every direction outside
+        ``degeneracy``'s subspace holds, or -inf when it says nothing: the weakest direction's
+        on a scan it found held in every direction; ``clear_information`` on its planes'
+        subspace when ``plane_refinement.check_screened_subspace`` is False (True: the checks
+        measure those directions themselves); -inf for a detection, or a result carried over
+        from another scan."""
+        if not _screen_result_here(degeneracy):
+            return -math.inf
+        if not len(degeneracy.basis_scaled):
+            return float(degeneracy.details["min_information"])
+        cfg = self.config.plane_refinement
+        return -math.inf if cfg.check_screened_subspace else float(cfg.clear_information)
 
     def _outside(self, degeneracy: DegeneracyResult, planar: bool) -> np.ndarray:
         """Orthonormal rows (scaled LiDAR twists, the detection's characteristic length)

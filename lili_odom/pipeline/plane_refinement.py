@@ -58,7 +58,7 @@ MIN_TESTED_INFORMATION = 1.0
 #: Values of ``PlaneRefinementConfig.return_check``.
 RETURN_CHECKS = ("off", "prediction", "bounded", "offset")
 #: Values of ``PlaneRefinementConfig.screened_subspace_remap``.
-SCREENED_SUBSPACE_REMAPS = ("registration", "prediction", "off")
+SCREENED_SUBSPACE_REMAPS = ("registration", "off")
 
 #: Values of ``PlaneRefinementConfig.refine_constrained``.
 REFINE_CONSTRAINED = ("off", "all", "planar")
@@ -164,11 +164,8 @@ class PlaneRefinementConfig:
         screened_subspace_remap: the solution remapping on a scan whose screen gave the
             planes' subspace (``screen_weak_information``), before the refinement inside it:
             ``registration`` (default; as on a detected subspace: the registration run again
-            held at the wheels' prediction along the subspace), ``prediction`` (the
-            registration with its components along the subspace replaced by the wheels'
-            prediction's, no registration run again: the constrained refinement that follows
-            measures the other directions on the planes) or ``off`` (the refinement starts
-            at the registration).
+            held at the wheels' prediction along the subspace) or ``off`` (the refinement
+            starts at the registration).
         check_screened_subspace: the weak-direction and along-track checks
             (``weak_information``, ``along_track``) on a scan whose screen gave the planes'
             subspace. False skips them: every direction outside that subspace is held with
