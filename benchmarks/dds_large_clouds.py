@@ -4,7 +4,8 @@ Each case runs ``python -m lili_odom.ros.cloud_check receive`` (the node's subsc
 best effort, depth 10, unless the case says reliable) and ``... publish`` (128 x 1024 clouds
 in the ouster-ros "original" layout, 6.3 MB, at 10 Hz) as two processes on this machine, each
 with its own environment, in an isolated domain (localhost only), and counts the clouds that
-arrive. Cases:
+arrive, and how long each takes from its publication (its stamp: the publisher's wall clock)
+to the receiving callback with the decoded cloud. Cases:
 
 * ``fastdds_default``: Fast DDS's own defaults on both sides (shared memory + UDP), best effort
 * ``large_data``: ``FASTDDS_BUILTIN_TRANSPORTS=LARGE_DATA`` on both sides, best effort
@@ -14,6 +15,8 @@ arrive. Cases:
 * ``reliable_fastdds_default``: Fast DDS defaults, reliable publisher and subscriber
 * ``reliable_to_best_effort_*``: a reliable publisher (``lili-odom play``'s default) and the
   node's best-effort subscription, with Fast DDS's defaults and with the package profile
+* ``*_raw``: as the case without the suffix, the clouds taken as serialised bytes and decoded
+  by rosbags (as ``lili_odom_node`` does) instead of converted by rclpy
 
 Cases named with ``--cases`` replace their rows in an existing result file.
 
@@ -38,7 +41,7 @@ from benchmarks._common import RESULTS, ROOT
 from lili_odom.ros.dds import profile_path
 
 CASES = {
-    # name: (publisher env, subscriber env, publisher qos, reliable subscription)
+    # name: (publisher env, subscriber env, publisher qos, reliable subscription[, decode])
     "fastdds_default": ({}, {}, "sensor-data", False),
     "large_data": ({"FASTDDS_BUILTIN_TRANSPORTS": "LARGE_DATA"},
                    {"FASTDDS_BUILTIN_TRANSPORTS": "LARGE_DATA"}, "sensor-data", False),
@@ -50,6 +53,10 @@ CASES = {
     "reliable_to_best_effort_fastdds_default": ({}, {}, "reliable", False),
     "reliable_to_best_effort_profile_both": ({"profile": "1"}, {"profile": "1"}, "reliable",
                                              False),
+    "profile_both_raw": ({"profile": "1"}, {"profile": "1"}, "sensor-data", False, "raw"),
+    # `lili-odom play` into the node with `reliable_inputs` (the node latency benchmark)
+    "reliable_profile_both": ({"profile": "1"}, {"profile": "1"}, "reliable", True),
+    "reliable_profile_both_raw": ({"profile": "1"}, {"profile": "1"}, "reliable", True, "raw"),
 }
 _DDS_VARS = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE",
              "FASTDDS_BUILTIN_TRANSPORTS", "LILI_ODOM_DDS_PROFILE")
@@ -67,7 +74,8 @@ def _env(base: dict[str, str], extra: dict[str, str]) -> dict[str, str]:
 
 
 def run_case(name: str, count: int, rate: float, height: int, width: int) -> dict:
-    pub_extra, sub_extra, qos, reliable_sub = CASES[name]
+    pub_extra, sub_extra, qos, reliable_sub, *rest = CASES[name]
+    decode = rest[0] if rest else "rclpy"
     base = dict(os.environ)
     base["ROS_DOMAIN_ID"] = str(random.randint(100, 200))
     base["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -76,12 +84,14 @@ def run_case(name: str, count: int, rate: float, height: int, width: int) -> dic
     cli = [sys.executable, "-m", "lili_odom.ros.cloud_check"]
     shape = ["--count", str(count), "--rate", str(rate), "--height", str(height),
              "--width", str(width)]
-    recv = subprocess.Popen(cli + ["receive", *shape, "--timeout", str(count / rate + 40)]
+    recv = subprocess.Popen(cli + ["receive", *shape, "--timeout", str(count / rate + 40),
+                                   "--decode", decode, "--stamp-now"]
                             + (["--reliable-sub"] if reliable_sub else []),
                             env=_env(base, sub_extra), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     time.sleep(1.0)
-    pub = subprocess.run(cli + ["publish", *shape, "--qos", qos], env=_env(base, pub_extra),
+    pub = subprocess.run(cli + ["publish", *shape, "--qos", qos, "--stamp-now"],
+                         env=_env(base, pub_extra),
                          capture_output=True, text=True, timeout=count / rate + 60)
     recv.wait(timeout=count / rate + 60) if pub.returncode == 0 else recv.kill()
     out, err = recv.communicate()
@@ -99,15 +109,23 @@ def render(doc: dict) -> str:
              f"`python -m benchmarks.dds_large_clouds` on {doc['machine']}; "
              f"{doc['height']} x {doc['width']} clouds ({doc['bytes_per_cloud'] / 1e6:.1f} MB) "
              f"at {doc['rate_hz']:g} Hz, {doc['count']} per case, Fast DDS {doc['fastdds']}.", "",
-             "| case | publisher QoS | subscription | received | fraction |",
-             "|---|---|---|---|---|"]
+             "Latency: from publication (the stamp, the publisher's wall clock) to the receiving "
+             "callback holding the decoded cloud, over the clouds received [ms]; decode: rclpy's "
+             "message conversion, or the serialised bytes decoded by rosbags (`raw`, as "
+             "`lili_odom_node` takes its clouds).", "",
+             "| case | publisher QoS | subscription | decode | received | fraction | "
+             "latency p50 / p99 / mean [ms] |",
+             "|---|---|---|---|---|---|---|"]
     for r in doc["rows"]:
         if "error" in r:
-            lines.append(f"| {r['case']} | | | error: {r['error'][:80]} | |")
+            lines.append(f"| {r['case']} | | | | error: {r['error'][:80]} | | |")
             continue
+        lat = r.get("latency_ms")
+        lat = f"{lat['p50']:.1f} / {lat['p99']:.1f} / {lat['mean']:.1f}" if lat else "–"
         lines.append(f"| {r['case']} | {r['publisher_qos']} | "
                      f"{'reliable' if r['reliable_subscription'] else 'best effort'} | "
-                     f"{r['received']} / {r['published']} | {r['fraction']:.2f} |")
+                     f"{r.get('decode', 'rclpy')} | {r['received']} / {r['published']} | "
+                     f"{r['fraction']:.2f} | {lat} |")
     return "\n".join(lines) + "\n"
 
 

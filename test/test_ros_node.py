@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
+import rclpy.serialization  # noqa: E402
 
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
@@ -129,6 +130,35 @@ def test_one_odometry_per_scan(harness_factory):
     assert [round(M.stamp_seconds(q.header), 6) for q in path] == \
         [round(10.0 + 0.1 * k, 6) for k in range(n)]
     assert {q.header.frame_id for q in path} == {"test_odom"}
+
+
+def test_a_cloud_that_does_not_decode_is_counted_and_the_next_is_processed(harness_factory):
+    provider = FakeProvider()
+    h = harness_factory(provider, [Parameter("diagnostics_period", value=0.0)])
+    good = h.cloud(30.0)
+    raw = rclpy.serialization.serialize_message(good)
+    h.pub_cloud.publish(raw[:40])  # a CDR header and a cut-off PointCloud2
+    assert wait_for(lambda: h.node.counters["undecodable_clouds"] == 1, 5.0), h.node.diagnostics()
+    h.pub_cloud.publish(raw)  # serialised bytes and message objects arrive alike
+    h.pub_cloud.publish(h.cloud(30.1))
+    assert wait_for(lambda: len(h.received["odom"]) == 2, 10.0), h.node.diagnostics()
+    diag = h.node.diagnostics()
+    assert diag["scans_received"] == 3 and diag["undecodable_clouds"] == 1
+    assert diag["scans_processed"] == 2 and diag["scan_errors"] == 0
+    scans = provider.created[0].scans
+    assert [s.stamp for s in scans] == pytest.approx([30.0, 30.1])
+    assert scans[0].points.shape == (100, 3)
+    np.testing.assert_allclose(scans[0].points, M.scan_from_msg(good).points)
+
+    class Unreadable:  # an encoding rosbags does not read: rclpy decodes the cloud
+        def deserialize_cdr(self, raw, typename):
+            raise ValueError("unsupported encapsulation")
+
+    h.node._typestore = Unreadable()
+    h.pub_cloud.publish(h.cloud(30.2))
+    assert wait_for(lambda: len(h.received["odom"]) == 3, 10.0), h.node.diagnostics()
+    assert h.node.diagnostics()["undecodable_clouds"] == 1
+    assert provider.created[0].scans[-1].stamp == pytest.approx(30.2)
 
 
 def test_slow_pipeline_drops_older_pending_scans(harness_factory):

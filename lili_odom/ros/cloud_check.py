@@ -5,7 +5,11 @@
 ``python -m lili_odom.ros.cloud_check receive`` counts what arrives with the node's subscription
 QoS (best effort, depth ``scan_subscription_depth``); ``python -m lili_odom.ros.cloud_check run``
 starts the publisher as a subprocess and receives in this process, printing one JSON line:
-``{"published", "received", "missing", "fraction", ...}``.
+``{"published", "received", "missing", "fraction", ...}``. With ``--stamp-now`` the publisher
+stamps each cloud with the wall clock as it publishes it, and the receiver adds the delivery
+latency (its wall clock when the callback has the decoded cloud minus the stamp; p50 / p99 /
+mean [ms]). ``--decode raw`` takes the clouds as serialised bytes and decodes them with
+rosbags, as ``lili_odom_node`` does; ``--decode rclpy`` (default) lets rclpy convert them.
 
 Both sides load the package's DDS profile like ``lili_odom_node`` does
 (:func:`lili_odom.ros.dds.apply_dds_defaults`), unless ``--no-profile`` is given (or the
@@ -83,9 +87,10 @@ def qos_profile(kind: str, depth: int) -> Any:
 
 def publish_clouds(count: int, rate_hz: float, height: int, width: int, qos: str = "sensor-data",
                    topic: str = "/ouster/points", depth: int = 5, wait_s: float = 20.0,
-                   t0: float = 1000.0) -> int:
-    """Publish ``count`` clouds stamped ``t0 + k / rate_hz`` at ``rate_hz`` (wall); returns the
-    number published. Waits up to ``wait_s`` for a subscriber first."""
+                   t0: float = 1000.0, stamp_now: bool = False) -> int:
+    """Publish ``count`` clouds stamped ``t0 + k / rate_hz`` (``stamp_now``: the wall clock at
+    publication) at ``rate_hz`` (wall); returns the number published. Waits up to ``wait_s``
+    for a subscriber first."""
     import rclpy
     from rclpy.serialization import serialize_message
 
@@ -110,7 +115,7 @@ def publish_clouds(count: int, rate_hz: float, height: int, width: int, qos: str
             delay = target - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
-            pub.publish(_with_stamp(base, t0 + k * period))
+            pub.publish(_with_stamp(base, time.time() if stamp_now else t0 + k * period))
         if qos == "reliable":
             from rclpy.duration import Duration
 
@@ -124,14 +129,24 @@ def publish_clouds(count: int, rate_hz: float, height: int, width: int, qos: str
 
 def receive_clouds(expected: int, timeout_s: float, qos: str = "sensor-data",
                    topic: str = "/ouster/points", depth: int = 10,
-                   start_publisher: list[str] | None = None) -> dict[str, Any]:
-    """Subscribe (QoS ``qos``, ``depth``), optionally start ``start_publisher`` (argv), and count
-    clouds until ``expected`` arrived, the publisher exited and 1 s passed, or ``timeout_s``."""
+                   start_publisher: list[str] | None = None, decode: str = "rclpy",
+                   latency: bool = False) -> dict[str, Any]:
+    """Subscribe (QoS ``qos``, ``depth``; ``decode`` "rclpy" or "raw": see the module
+    docstring), optionally start ``start_publisher`` (argv), and count clouds until
+    ``expected`` arrived, the publisher exited and 1 s passed, or ``timeout_s``. With
+    ``latency`` (the publisher stamps with the wall clock) the result also holds
+    ``latency_ms``."""
+    import numpy as np
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
     from lili_odom import messages as M
+    from lili_odom.bagio.factory import jazzy_typestore
     from lili_odom.ros.factory import message_class
+
+    if decode not in ("rclpy", "raw"):
+        raise ValueError(f"decode must be 'rclpy' or 'raw', got {decode!r}")
+    typestore = jazzy_typestore()
 
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -139,13 +154,18 @@ def receive_clouds(expected: int, timeout_s: float, qos: str = "sensor-data",
                              start_parameter_services=False)
     stamps: list[float] = []
     sizes: list[int] = []
+    delays: list[float] = []
 
     def on_cloud(msg: Any) -> None:
-        stamps.append(M.stamp_seconds(msg.header))
+        if decode == "raw":
+            msg = typestore.deserialize_cdr(msg, "sensor_msgs/msg/PointCloud2")
+        stamp = M.stamp_seconds(msg.header)
+        delays.append(time.time() - stamp)
+        stamps.append(stamp)
         sizes.append(len(msg.data))
 
     node.create_subscription(message_class("sensor_msgs/msg/PointCloud2"), topic, on_cloud,
-                             qos_profile(qos, depth))
+                             qos_profile(qos, depth), raw=decode == "raw")
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     proc = None
@@ -178,10 +198,16 @@ def receive_clouds(expected: int, timeout_s: float, qos: str = "sensor-data",
         node.destroy_node()
         rclpy.try_shutdown(context=context)
     received = len(set(stamps))
-    return {"published": expected, "received": received, "missing": expected - received,
-            "fraction": round(received / expected, 4) if expected else 1.0,
-            "bytes_per_cloud": sizes[0] if sizes else 0,
-            "seconds": round(time.monotonic() - t_start, 2)}
+    result = {"published": expected, "received": received, "missing": expected - received,
+              "fraction": round(received / expected, 4) if expected else 1.0,
+              "bytes_per_cloud": sizes[0] if sizes else 0, "decode": decode,
+              "seconds": round(time.monotonic() - t_start, 2)}
+    if latency and delays:
+        ms = 1e3 * np.asarray(delays)
+        result["latency_ms"] = {"p50": round(float(np.percentile(ms, 50)), 2),
+                                "p99": round(float(np.percentile(ms, 99)), 2),
+                                "mean": round(float(ms.mean()), 2)}
+    return result
 
 
 def _args(argv: list[str] | None) -> argparse.Namespace:
@@ -201,6 +227,12 @@ def _args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--timeout", type=float, default=60.0)
     p.add_argument("--no-profile", action="store_true",
                    help="do not load the package's DDS profile (measure the middleware default)")
+    p.add_argument("--decode", choices=("rclpy", "raw"), default="rclpy",
+                   help="receiver: rclpy's message conversion, or serialised bytes decoded by "
+                   "rosbags as lili_odom_node does")
+    p.add_argument("--stamp-now", action="store_true",
+                   help="publisher: stamp with the wall clock; receiver: report the delivery "
+                   "latency")
     return p.parse_args(argv)
 
 
@@ -211,7 +243,8 @@ def main(argv: list[str] | None = None) -> int:
 
         apply_dds_defaults()
     if a.role == "publish":
-        publish_clouds(a.count, a.rate, a.height, a.width, a.qos, a.topic)
+        publish_clouds(a.count, a.rate, a.height, a.width, a.qos, a.topic,
+                       stamp_now=a.stamp_now)
         return 0
     cmd = None
     if a.role == "run":
@@ -220,8 +253,11 @@ def main(argv: list[str] | None = None) -> int:
                "--width", str(a.width), "--qos", a.qos, "--topic", a.topic]
         if a.no_profile:
             cmd.append("--no-profile")
+        if a.stamp_now:
+            cmd.append("--stamp-now")
     result = receive_clouds(a.count, a.timeout, "reliable" if a.reliable_sub else "sensor-data",
-                            a.topic, a.depth, start_publisher=cmd)
+                            a.topic, a.depth, start_publisher=cmd, decode=a.decode,
+                            latency=a.stamp_now)
     result.update({"qos": a.qos, "height": a.height, "width": a.width, "rate_hz": a.rate,
                    "profile": os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE", ""),
                    "builtin_transports": os.environ.get("FASTDDS_BUILTIN_TRANSPORTS", "")})

@@ -6,7 +6,10 @@ Run: ``lili_odom_node --ros-args --params-file config/lili_odom.yaml [-p use_sim
 Inputs (sensor-data QoS, best effort, so any publisher matches; ``reliable_inputs: true``
 subscribes RELIABLE instead, for lossless replays from a reliable publisher such as
 ``lili-odom play``; topics are parameters):
-``lidar_topic`` (``/ouster/points``, PointCloud2), ``imu_topic`` (``/ouster/imu``, Imu),
+``lidar_topic`` (``/ouster/points``, PointCloud2, taken as its serialised bytes and decoded
+by rosbags, which reads the point buffer in place instead of copying it into an rclpy message
+(docs/ros.md, "Latency"; by rclpy when rosbags does not read its encoding); a cloud that
+decodes with neither is counted in ``undecodable_clouds`` and logged), ``imu_topic`` (``/ouster/imu``, Imu),
 ``wheel_topic`` (``/platform/odom``, Odometry), and ``/tf_static`` when
 ``extrinsics.use_tf_static`` is true and ``tf2_msgs`` is importable: when it links
 ``base_frame`` to the cloud's frame before the first scan, it replaces the configured
@@ -84,9 +87,11 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
+from rclpy.serialization import deserialize_message
 from rcl_interfaces.msg import ParameterDescriptor
 
 from lili_odom import messages as M
+from lili_odom.bagio.factory import jazzy_typestore
 from lili_odom.config import coerce_parameter
 from lili_odom.io.map_file import MapAccumulator, save_points
 from lili_odom.pipeline.feeder import MessageFeeder
@@ -184,7 +189,7 @@ class LiliOdomNode(Node):
         self.counters: dict[str, int] = {
             "scans_received": 0, "scans_processed": 0, "scans_dropped": 0,
             "scans_no_output": 0, "scan_errors": 0, "imu_received": 0, "wheel_received": 0,
-            "resets": 0, "scans_missing": 0,
+            "resets": 0, "scans_missing": 0, "undecodable_clouds": 0,
         }
         self.health = HealthMonitor(HealthConfig(lidar_hz=float(self.p["lidar_rate_hz"]),
                                                  imu_hz=float(self.p["imu_rate_hz"]),
@@ -227,9 +232,11 @@ class LiliOdomNode(Node):
                 self.pub_tf = self.create_publisher(tf_cls, "/tf", _reliable_qos(100))
 
         reliable = bool(self.p["reliable_inputs"])
+        self._typestore = jazzy_typestore()
         self.create_subscription(message_class("sensor_msgs/msg/PointCloud2"),
                                  self.p["lidar_topic"], self._on_scan,
-                                 _sensor_qos(int(self.p["scan_subscription_depth"]), reliable))
+                                 _sensor_qos(int(self.p["scan_subscription_depth"]), reliable),
+                                 raw=True)
         self.create_subscription(message_class("sensor_msgs/msg/Imu"), self.p["imu_topic"],
                                  self._on_imu, _sensor_qos(200, reliable))
         self.create_subscription(message_class("nav_msgs/msg/Odometry"), self.p["wheel_topic"],
@@ -288,7 +295,12 @@ class LiliOdomNode(Node):
     # -- callbacks (cheap) ---------------------------------------------------------------
 
     def _on_scan(self, msg: Any) -> None:
+        """A cloud: its serialised bytes (decoded here) or a message object."""
         self.counters["scans_received"] += 1
+        if isinstance(msg, (bytes, bytearray, memoryview)):
+            msg = self._decode_cloud(msg)
+            if msg is None:
+                return
         try:
             missing = self.health.on_scan(M.stamp_seconds(msg.header))
         except (AttributeError, TypeError, ValueError):
@@ -306,6 +318,22 @@ class LiliOdomNode(Node):
                 f"processing slower than the LiDAR: dropped {self._scans.dropped} older "
                 f"scan(s) so far (at most {self._scans.maxlen} scans wait; the oldest goes)",
                 throttle_duration_sec=5.0)
+
+    def _decode_cloud(self, raw: bytes) -> Any | None:
+        """A serialised PointCloud2 decoded by rosbags (the point buffer read in place), or by
+        rclpy when rosbags does not read its encoding; None (counted, logged) when neither
+        decodes it."""
+        try:
+            return self._typestore.deserialize_cdr(raw, "sensor_msgs/msg/PointCloud2")
+        except Exception:  # noqa: BLE001 - e.g. an encoding rosbags does not read
+            pass
+        try:
+            return deserialize_message(bytes(raw), message_class("sensor_msgs/msg/PointCloud2"))
+        except Exception as exc:  # noqa: BLE001 - a corrupt cloud must not stop the node
+            self.counters["undecodable_clouds"] += 1
+            self.get_logger().warn(f"cloud skipped: it does not decode as a PointCloud2 "
+                                   f"({type(exc).__name__}: {exc})", throttle_duration_sec=5.0)
+            return None
 
     def _on_imu(self, msg: Any) -> None:
         self.counters["imu_received"] += 1
