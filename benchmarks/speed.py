@@ -271,11 +271,37 @@ def run_method(bag: Path | str, method: str, start: float, scans: int, warmup: i
 
 # ----------------------------------------------------------------------------- machine
 
+def _cpu_jiffies() -> list[int]:
+    """The machine's CPU time fields from /proc/stat (user, nice, system, idle, iowait, irq,
+    softirq, steal, ...) [jiffies]."""
+    return [int(x) for x in Path("/proc/stat").read_text().splitlines()[0].split()[1:]]
+
+
 def _cpu_busy_jiffies() -> tuple[int, int]:
-    """(busy, total) jiffies of the whole machine from /proc/stat."""
-    f = [int(x) for x in Path("/proc/stat").read_text().splitlines()[0].split()[1:]]
+    """(busy, total) jiffies of the whole machine from /proc/stat; busy leaves out idle,
+    iowait and steal (time the hypervisor gave to other guests, :func:`steal_cores`)."""
+    f = _cpu_jiffies()
     idle = f[3] + (f[4] if len(f) > 4 else 0)
-    return sum(f) - idle, sum(f)
+    return sum(f) - idle - _steal(f), sum(f)
+
+
+def _steal(fields: list[int]) -> int:
+    return fields[7] if len(fields) > 7 else 0
+
+
+def steal_jiffies() -> int:
+    """Jiffies the hypervisor has taken from this virtual machine since boot (0 on bare metal
+    or where the kernel does not count it)."""
+    return _steal(_cpu_jiffies())
+
+
+def steal_cores(steal0: int, wall: float) -> float:
+    """Mean cores the hypervisor took from this machine since ``steal0``
+    (:func:`steal_jiffies`) over ``wall`` seconds: a virtual machine's cores that ran another
+    guest, so every process here ran slower."""
+    if wall <= 0:
+        return 0.0
+    return max(0.0, (steal_jiffies() - steal0) / os.sysconf("SC_CLK_TCK") / wall)
 
 
 def _other_load(busy0: int, children0, wall: float) -> float:
@@ -313,13 +339,15 @@ def _other_processes(min_cpu: float = 10.0, limit: int = 6) -> list[str]:
 class LoadMeter:
     """The machine's load while a benchmark runs: started at construction, read by
     :meth:`report` (JSON-ready: load averages before / after, wall time [s], mean cores used
-    by other processes, the busiest other processes at the start)."""
+    by other processes and taken by the hypervisor, the busiest other processes at the
+    start)."""
 
     def __init__(self) -> None:
         self._busy0, _ = _cpu_busy_jiffies()
         self._children0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         self._load0 = os.getloadavg()
         self._others0 = _other_processes()
+        self._steal0 = steal_jiffies()
         self._t0 = time.monotonic()
 
     def report(self) -> dict:
@@ -327,6 +355,7 @@ class LoadMeter:
         return {"loadavg_before": list(self._load0), "loadavg_after": list(os.getloadavg()),
                 "wall_s": wall, "other_processes_cores": _other_load(self._busy0,
                                                                      self._children0, wall),
+                "steal_cores": steal_cores(self._steal0, wall),
                 "other_processes_at_start": self._others0}
 
 
@@ -343,6 +372,8 @@ def machine_load_lines(m: dict, load: dict) -> list[str]:
         f"{load['loadavg_after'][0]:.2f} after; other processes used "
         f"{load['other_processes_cores']:.2f} of {m['cores']} cores on average during the "
         f"{load['wall_s'] / 60:.1f} min run"
+        + (f", the hypervisor took {load['steal_cores']:.2f} (steal time)"
+           if "steal_cores" in load else "")
         + ("; busy at the start: " + "; ".join(f"`{p}`" for p in load["other_processes_at_start"])
            if load["other_processes_at_start"] else "") + ".",
     ]

@@ -154,7 +154,7 @@ def test_a_cloud_that_does_not_decode_is_counted_and_the_next_is_processed(harne
         def deserialize_cdr(self, raw, typename):
             raise ValueError("unsupported encapsulation")
 
-    h.node._typestore = Unreadable()
+    h.node._decode.typestore = Unreadable()
     h.pub_cloud.publish(h.cloud(30.2))
     assert wait_for(lambda: len(h.received["odom"]) == 3, 10.0), h.node.diagnostics()
     assert h.node.diagnostics()["undecodable_clouds"] == 1

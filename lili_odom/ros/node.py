@@ -7,9 +7,10 @@ Inputs (sensor-data QoS, best effort, so any publisher matches; ``reliable_input
 subscribes RELIABLE instead, for lossless replays from a reliable publisher such as
 ``lili-odom play``; topics are parameters):
 ``lidar_topic`` (``/ouster/points``, PointCloud2, taken as its serialised bytes and decoded
-by rosbags, which reads the point buffer in place instead of copying it into an rclpy message
-(docs/ros.md, "Latency"; by rclpy when rosbags does not read its encoding); a cloud that
-decodes with neither is counted in ``undecodable_clouds`` and logged), ``imu_topic`` (``/ouster/imu``, Imu),
+by rosbags, which reads the point buffer in place instead of copying it into an rclpy message,
+or by rclpy when rosbags does not read its encoding: :mod:`lili_odom.ros.cloud_decode`,
+docs/ros.md "Latency"; a cloud that decodes with neither is counted in
+``undecodable_clouds`` and logged), ``imu_topic`` (``/ouster/imu``, Imu),
 ``wheel_topic`` (``/platform/odom``, Odometry), and ``/tf_static`` when
 ``extrinsics.use_tf_static`` is true and ``tf2_msgs`` is importable: when it links
 ``base_frame`` to the cloud's frame before the first scan, it replaces the configured
@@ -87,15 +88,14 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
-from rclpy.serialization import deserialize_message
 from rcl_interfaces.msg import ParameterDescriptor
 
 from lili_odom import messages as M
-from lili_odom.bagio.factory import jazzy_typestore
 from lili_odom.config import coerce_parameter
 from lili_odom.io.map_file import MapAccumulator, save_points
 from lili_odom.pipeline.feeder import MessageFeeder
 from lili_odom.pipeline.types import OdometryOutput
+from lili_odom.ros.cloud_decode import CloudDecoder, UndecodableCloud
 from lili_odom.ros.dds import apply_dds_defaults
 from lili_odom.ros.factory import MessageTypeError, RclpyFactory, message_class
 from lili_odom.ros.health import HealthConfig, HealthMonitor
@@ -232,7 +232,7 @@ class LiliOdomNode(Node):
                 self.pub_tf = self.create_publisher(tf_cls, "/tf", _reliable_qos(100))
 
         reliable = bool(self.p["reliable_inputs"])
-        self._typestore = jazzy_typestore()
+        self._decode = CloudDecoder()
         self.create_subscription(message_class("sensor_msgs/msg/PointCloud2"),
                                  self.p["lidar_topic"], self._on_scan,
                                  _sensor_qos(int(self.p["scan_subscription_depth"]), reliable),
@@ -320,19 +320,14 @@ class LiliOdomNode(Node):
                 throttle_duration_sec=5.0)
 
     def _decode_cloud(self, raw: bytes) -> Any | None:
-        """A serialised PointCloud2 decoded by rosbags (the point buffer read in place), or by
-        rclpy when rosbags does not read its encoding; None (counted, logged) when neither
-        decodes it."""
+        """The serialised cloud decoded (:class:`lili_odom.ros.cloud_decode.CloudDecoder`), or
+        None, counted and logged, when it does not decode."""
         try:
-            return self._typestore.deserialize_cdr(raw, "sensor_msgs/msg/PointCloud2")
-        except Exception:  # noqa: BLE001 - e.g. an encoding rosbags does not read
-            pass
-        try:
-            return deserialize_message(bytes(raw), message_class("sensor_msgs/msg/PointCloud2"))
-        except Exception as exc:  # noqa: BLE001 - a corrupt cloud must not stop the node
+            return self._decode(raw)
+        except UndecodableCloud as exc:
             self.counters["undecodable_clouds"] += 1
-            self.get_logger().warn(f"cloud skipped: it does not decode as a PointCloud2 "
-                                   f"({type(exc).__name__}: {exc})", throttle_duration_sec=5.0)
+            self.get_logger().warn(f"cloud skipped: it does not decode as a PointCloud2 ({exc})",
+                                   throttle_duration_sec=5.0)
             return None
 
     def _on_imu(self, msg: Any) -> None:
