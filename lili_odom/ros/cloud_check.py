@@ -141,12 +141,12 @@ def receive_clouds(expected: int, timeout_s: float, qos: str = "sensor-data",
     from rclpy.executors import SingleThreadedExecutor
 
     from lili_odom import messages as M
-    from lili_odom.bagio.factory import jazzy_typestore
+    from lili_odom.ros.cloud_decode import CloudDecoder
     from lili_odom.ros.factory import message_class
 
     if decode not in ("rclpy", "raw"):
         raise ValueError(f"decode must be 'rclpy' or 'raw', got {decode!r}")
-    typestore = jazzy_typestore()
+    decoder = CloudDecoder()
 
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -158,7 +158,7 @@ def receive_clouds(expected: int, timeout_s: float, qos: str = "sensor-data",
 
     def on_cloud(msg: Any) -> None:
         if decode == "raw":
-            msg = typestore.deserialize_cdr(msg, "sensor_msgs/msg/PointCloud2")
+            msg = decoder(msg)
         stamp = M.stamp_seconds(msg.header)
         delays.append(time.time() - stamp)
         stamps.append(stamp)
