@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import numpy as np
 
@@ -51,6 +52,26 @@ def test_scan_queue_slow_consumer_processes_newest():
     th.join(2.0)
     assert done[-1] == 49
     assert len(done) + slot.dropped == 50 and slot.dropped > 0
+
+
+def test_scan_queue_wake_ends_a_wait_without_an_item():
+    q = ScanQueue(2)
+    q.wake()  # before the wait: the next take returns at once
+    t0 = time.monotonic()
+    assert q.take(5.0) is None and time.monotonic() - t0 < 2.0
+    got = []
+    waiter = threading.Thread(target=lambda: got.append(q.take(5.0)))
+    waiter.start()
+    threading.Event().wait(0.05)
+    t0 = time.monotonic()
+    q.wake()
+    waiter.join(5.0)
+    assert got == [None] and time.monotonic() - t0 < 2.0
+    q.put(7)
+    q.wake()  # an item waiting is taken, and the wake is used up
+    assert q.take(0.0) == 7
+    t0 = time.monotonic()
+    assert q.take(0.2) is None and time.monotonic() - t0 >= 0.15
 
 
 def test_sample_buffer_bounded():

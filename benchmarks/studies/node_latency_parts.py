@@ -128,10 +128,13 @@ def summary(scans: list[dict[str, float]]) -> dict[str, dict[str, float]]:
 
 def markdown(report: dict[str, Any], command: str) -> str:
     m = report["machine"]
+    dirty = m.get("uncommitted_lili_odom") or []
     lines = ["# Where a scan's latency goes in the node", "",
              f"`{command}` (module docstring): the piece of `benchmarks.node_latency` played "
              "at 10 Hz into the node, its methods timed on the system clock. Machine: "
-             f"{m['cpu']}, {m['cores']} cores, Python {m['python']}; commit `{m['commit']}`.",
+             f"{m['cpu']}, {m['cores']} cores, Python {m['python']}; commit `{m['commit']}`"
+             + (" with uncommitted changes in " + ", ".join(f"`{p}`" for p in dirty)
+                if dirty else "") + ".",
              "",
              "Mean / p99 per scan [ms]. arrival: sweep end to the cloud callback; queue: to "
              "the worker; parse: the cloud to points; wait: feeding IMU and wheels and waiting "
@@ -194,7 +197,8 @@ def main(argv=None) -> int:
     command = ("python -m benchmarks.studies.node_latency_parts --resolutions "
                + " ".join(bags) + "".join(f" --set {item}" for item in args.set)
                + (f" --name {args.name}" if args.name != "node_latency_parts" else ""))
-    report = {"machine": machine_info(), "parameters": parameters, "resolutions": rows}
+    report = {"machine": machine_info(), "command": command, "parameters": parameters,
+              "resolutions": rows}
     print(f"wrote {write_results(args.out, args.name, markdown(report, command), report)}")
     return 0
 

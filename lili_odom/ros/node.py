@@ -44,7 +44,8 @@ thread owns the pipeline and feeds it through the same
 :class:`lili_odom.pipeline.feeder.MessageFeeder` as the offline runner, so a scan is
 processed with exactly the IMU/wheel data the runner would use: it waits until the samples
 covering its sweep end have arrived (at most ``pipeline.sensor_wait_s`` of stamp time, or the
-same in wall time when the other inputs fall silent). The pipeline runs its degeneracy
+same in wall time when the other inputs fall silent); meanwhile each IMU or wheel message
+wakes the worker to feed it. The pipeline runs its degeneracy
 detector in a child process (``pipeline.detection_schedule.background``), stopped at
 shutdown, and builds the next scan's plane-fit k-d tree in a thread of its own.
 
@@ -334,11 +335,18 @@ class LiliOdomNode(Node):
         self.counters["imu_received"] += 1
         self.health.on_imu()
         self._inputs.append((self.p["imu_topic"], msg))
+        self._wake_if_waiting()
 
     def _on_wheel(self, msg: Any) -> None:
         self.counters["wheel_received"] += 1
         self.health.on_wheel()
         self._inputs.append((self.p["wheel_topic"], msg))
+        self._wake_if_waiting()
+
+    def _wake_if_waiting(self) -> None:
+        """A scan waits for the samples covering its sweep: let the worker feed this one."""
+        if self._feeder.pending:
+            self._scans.wake()
 
     def _on_tf_static(self, msg: Any) -> None:
         for parent, child, T in M.transforms_from_tf_msg(msg):

@@ -10,6 +10,8 @@ bounded at about ``maxlen + 1`` scan periods, instead of a queue growing without
 
 IMU and wheel callbacks append to a :class:`SampleBuffer` (cheap; bounded so a stalled worker
 cannot grow memory without limit; overflow is counted), drained by the worker before each scan.
+While a scan waits for the IMU and wheel samples that cover its sweep, they also
+:meth:`ScanQueue.wake` the worker, so it feeds them as they arrive.
 """
 from __future__ import annotations
 
@@ -36,6 +38,7 @@ class ScanQueue(Generic[T]):
         self._cond = threading.Condition()
         self._items: deque[T] = deque()
         self._closed = False
+        self._woken = False
         self.put_count = 0
         self.dropped = 0
 
@@ -52,11 +55,20 @@ class ScanQueue(Generic[T]):
             return dropped
 
     def take(self, timeout: float | None = None) -> T | None:
-        """Wait up to ``timeout`` s for an item and remove the oldest; None on timeout or close."""
+        """Wait up to ``timeout`` s for an item and remove the oldest; None on timeout, close or
+        :meth:`wake`."""
         with self._cond:
-            if not self._items and not self._closed:
+            if not self._items and not self._closed and not self._woken:
                 self._cond.wait(timeout)
+            self._woken = False
             return self._items.popleft() if self._items else None
+
+    def wake(self) -> None:
+        """End the current (or next) wait of :meth:`take` without an item: the waiter has
+        something else to do (new IMU or wheel samples for a scan that waits for them)."""
+        with self._cond:
+            self._woken = True
+            self._cond.notify()
 
     def __len__(self) -> int:
         with self._cond:
