@@ -182,6 +182,25 @@ def test_node_latency_targets_and_report():
     assert "| 128x1024 | 19.0 | 9.5 | 64.0 | 15.0 |" in md
 
 
+def test_node_latency_repeats_report_the_median_run():
+    runs = [{"latency_p50_s": 0.08, "latency_p99_s": p99, "dropped": d, "steal_cores": s,
+             "run": i} for i, (p99, d, s) in enumerate([(0.30, 5, 0.2), (0.12, 0, 0.0),
+                                                          (None, 0, 0.0), (0.14, 0, 0.01)])]
+    row = nl.median_run(runs)
+    assert row["run"] == 0  # p99 0.12, 0.14, 0.30, none: the upper middle one
+    assert [r["latency_p99_s"] for r in row["repeats"]] == [0.30, 0.12, None, 0.14]
+    assert nl.median_run(runs[1:2]) == runs[1] and "repeats" not in nl.median_run(runs[1:2])
+    assert nl.median_run(runs[:3])["run"] == 0  # 0.12, 0.30, none
+    row = {**row, "status": "ok", "nothing_lost": 1, "targets": nl.evaluate(row, "128x1024")}
+    report = {"machine": MACHINE, "load": LOAD, "piece": PIECE, "method": "lili", "rate": 1.0,
+              "target_p99_s": 0.1, "target_resolution": "128x1024",
+              "resolutions": {"128x1024": row}}
+    md = nl.markdown(report, "python -m benchmarks.node_latency --repeats 4")
+    assert ("- 128x1024: 300 ms, 5 dropped, 0.20; 120 ms, 0 dropped, 0.00; – ms, 0 dropped, "
+            "0.00; 140 ms, 0 dropped, 0.01") in md
+    assert "latency p99 <= 100 ms at 128x1024: 300 ms, **missed**" in md
+
+
 def test_long_runs_at_several_resolutions_are_reported_with_the_rss_target():
     from benchmarks.faults import render
 
