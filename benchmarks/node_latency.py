@@ -26,8 +26,8 @@ per scan, and the cores other processes used meanwhile. Targets: p99 at most 100
 128 x 1024; every scan processed (none dropped) at every resolution.
 
 With ``--repeats N`` each resolution is played N times in a row; the table shows the run
-with the median p99 and a column lists every run's p99 (and its steal time), so one run on
-a noisy machine does not decide a target.
+with the median p99 and a list under it gives every run's p99, drops and steal time, so one
+run on a noisy machine does not decide a target.
 """
 from __future__ import annotations
 
