@@ -6,7 +6,7 @@ import pytest
 
 from lili_odom import messages as M
 from lili_odom.bagio.factory import RosbagsFactory
-from lili_odom.commands.play import shift_header_stamp
+from lili_odom.commands.play import header_stamp_ns, shift_header_stamp
 
 F = RosbagsFactory()
 
@@ -16,6 +16,7 @@ def _roundtrip(msg, offset_ns: int):
     shifted = shift_header_stamp(data, offset_ns)
     assert isinstance(shifted, bytes) and len(shifted) == len(data)
     assert shifted[12:] == data[12:] and shifted[:4] == data[:4]  # only the stamp changed
+    assert header_stamp_ns(shifted) == header_stamp_ns(data) + offset_ns
     return F.typestore.deserialize_cdr(shifted, msg.__msgtype__)
 
 
@@ -48,6 +49,8 @@ def test_clouds_and_odometry_keep_their_content():
 def test_bad_input_is_a_value_error():
     with pytest.raises(ValueError):
         shift_header_stamp(b"\x00\x01\x00\x00\x01", 1)
+    with pytest.raises(ValueError):
+        header_stamp_ns(b"\x00\x01\x00\x00\x01")
     imu = F.new("sensor_msgs/msg/Imu", header=M.header_msg(F, 1.0, "os_imu"))
     with pytest.raises(ValueError):
         shift_header_stamp(F.serialize(imu), -2_000_000_000)

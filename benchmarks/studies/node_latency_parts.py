@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import struct
 import subprocess
 import sys
 import time
@@ -44,11 +43,13 @@ PARTS = ("arrival", "queue", "parse", "wait", "pipeline", "cpu", "publish", "lat
 
 
 def _header_stamp(msg: Any) -> float:
-    """``header.stamp`` [s] of a cloud: a message, or its CDR bytes (little endian)."""
+    """``header.stamp`` [s] of a cloud: a message, or its CDR bytes."""
+    from lili_odom.commands.play import header_stamp_ns
+    from lili_odom.messages import stamp_seconds
+
     if isinstance(msg, (bytes, bytearray, memoryview)):
-        sec, nsec = struct.unpack_from("<iI", msg, 4)
-        return sec + 1e-9 * nsec
-    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        return 1e-9 * header_stamp_ns(msg)
+    return stamp_seconds(msg.header)
 
 
 def trace(bag: Path, parameters: dict[str, Any]) -> dict[str, Any]:

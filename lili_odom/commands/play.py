@@ -64,16 +64,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress output")
 
 
-def shift_header_stamp(data: bytes, offset_ns: int) -> bytes:
-    """The CDR-serialised message ``data`` (4-byte encapsulation header, then a message whose
-    first field is a ``std_msgs/Header``) with ``header.stamp`` moved by ``offset_ns`` [ns].
-
-    Raises ValueError for data too short to hold a stamp or a stamp moved before 0."""
+def _stamp_endian(data: bytes) -> str:
     if len(data) < 12:
         raise ValueError(f"{len(data)} bytes cannot hold a CDR header stamp")
-    endian = "<" if data[1] & 1 else ">"  # encapsulation kind: odd = little endian
-    sec, nanosec = struct.unpack_from(endian + "iI", data, 4)
-    total = sec * 1_000_000_000 + nanosec + int(offset_ns)
+    return "<" if data[1] & 1 else ">"  # encapsulation kind: odd = little endian
+
+
+def header_stamp_ns(data: bytes) -> int:
+    """``header.stamp`` [ns] of the CDR-serialised message ``data`` (4-byte encapsulation
+    header, then a message whose first field is a ``std_msgs/Header``).
+
+    Raises ValueError for data too short to hold a stamp."""
+    sec, nanosec = struct.unpack_from(_stamp_endian(data) + "iI", data, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+def shift_header_stamp(data: bytes, offset_ns: int) -> bytes:
+    """The CDR-serialised message ``data`` (as :func:`header_stamp_ns` reads it) with
+    ``header.stamp`` moved by ``offset_ns`` [ns].
+
+    Raises ValueError for data too short to hold a stamp or a stamp moved before 0."""
+    endian = _stamp_endian(data)
+    total = header_stamp_ns(data) + int(offset_ns)
     if total < 0:
         raise ValueError(f"stamp {total * 1e-9:.3f} s before the epoch")
     stamp = struct.pack(endian + "iI", *divmod(total, 1_000_000_000))
