@@ -189,6 +189,7 @@ PARAMETER_RANGES: dict[str, tuple] = {
     "pipeline.remap_iterations": (0, 100, False, False, ""),
     "pipeline.scan_matcher.max_range": (0.0, 1000.0, True, False, "m"),
     "pipeline.scan_matcher.min_range": (0.0, 1000.0, False, True, "m"),
+    "pipeline.scan_matcher.point_stride": (1, 64, False, False, ""),
     "pipeline.scan_matcher.voxel_size": (0.0, 100.0, False, False, "m"),
     "pipeline.scan_matcher.max_points_per_voxel": (1, 10000, False, False, ""),
     "pipeline.scan_matcher.initial_threshold": (0.0, 100.0, True, False, "m"),

@@ -196,20 +196,23 @@ _WARNINGS = ThrottledWarnings(log)
 
 
 def default_cloud_parser(min_range: float = 0.0, max_range: float = math.inf,
-                         counters: "MutableMapping[str, int] | None" = None) -> CloudParser:
+                         counters: "MutableMapping[str, int] | None" = None,
+                         stride: int = 1) -> CloudParser:
     """A :data:`CloudParser` backed by :func:`lili_odom.pointcloud2.parse_cloud`.
 
     A cloud is used as far as it is valid: a corrupt per-point time field is ignored (no
     deskewing) and isolated corrupt times drop their points. Each case is counted in
     ``counters`` (when given: ``cloud_times_ignored``, ``cloud_bad_time_points``) and logged
     as a throttled warning saying why. Malformed layouts raise ``CloudFormatError``.
+    ``stride`` > 1 reads every ``stride``-th point only (``parse_cloud``); the points it
+    leaves out are not counted as dropped.
     """
 
     def parse(msg: Any, stamp: float) -> tuple[np.ndarray, np.ndarray | None, int]:
         from lili_odom.pointcloud2 import parse_cloud  # lazy: keeps this module light
 
         parsed = parse_cloud(msg, min_range=min_range, max_range=max_range, stamp=stamp,
-                             extra_fields=False)
+                             extra_fields=False, stride=stride)
         s = parsed.stats
         if s.times_ignored:
             if counters is not None:
@@ -222,7 +225,7 @@ def default_cloud_parser(min_range: float = 0.0, max_range: float = math.inf,
                                                      + s.n_bad_time)
             _WARNINGS.warning("bad_time", "cloud at %.3f: %d points with corrupt "
                               "per-point times dropped", stamp, s.n_bad_time)
-        return parsed.xyz, parsed.times, s.n_total - s.n_kept
+        return parsed.xyz, parsed.times, s.n_total - s.n_skipped - s.n_kept
 
     return parse
 

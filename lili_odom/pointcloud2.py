@@ -97,11 +97,13 @@ class CloudContent:
 class ParseStats:
     """Point counts of one parse.
 
-    ``n_total`` = height * width; ``n_kept`` + every drop counter = ``n_total`` (each point is
-    counted once, under the first reason that applies, in the order listed here).
+    ``n_total`` = height * width; ``n_skipped`` + ``n_kept`` + every drop counter =
+    ``n_total`` (each point is counted once, under the first reason that applies, in the order
+    listed here).
     """
 
     n_total: int = 0
+    n_skipped: int = 0  # left out by the point stride (not read, valid or not)
     n_nonfinite: int = 0  # NaN/Inf coordinates (ouster no-return pixels) or NaN time
     n_zero_range: int = 0  # xyz == 0 or a range field == 0 (older ouster drivers)
     n_too_close: int = 0  # norm(xyz) < min_range
@@ -376,6 +378,7 @@ def parse_cloud(
     stamp: float | None = None,
     max_sweep_s: float = MAX_SWEEP_S,
     extra_fields: bool = True,
+    stride: int = 1,
 ) -> ParsedCloud:
     """Parse PointCloud2 content into valid points and per-point times.
 
@@ -393,6 +396,10 @@ def parse_cloud(
         extra_fields: also return the ``intensity``, ``range`` and ``ring`` of the kept points;
             False leaves them None (the odometry uses points and times only). A ``range``
             field still marks zero-range points either way.
+        stride: read only every ``stride``-th point of the cloud in its own order (row-major:
+            in an organised Ouster cloud whose width is a multiple of ``stride``, every
+            ``stride``-th column of each ring); the others are counted as
+            ``stats.n_skipped``. 1 (default) reads every point.
 
     Returns:
         The kept points (NaN/Inf, zero-range, out-of-range and corrupt-time points removed)
@@ -401,7 +408,11 @@ def parse_cloud(
     Raises:
         CloudFormatError: missing x/y/z, inconsistent point_step/row_step/data length, a field
             overrunning point_step, an unknown datatype, or a non-buffer payload.
+        ValueError: a stride that is not a positive integer.
     """
+    if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)) or stride < 1:
+        raise ValueError(f"stride must be a positive integer, got {stride!r}")
+    stride = int(stride)
     fields, big, point_step, row_step, height, width, raw = _validate(msg)
     n_total = height * width
     stats = ParseStats(n_total=n_total)
@@ -418,6 +429,10 @@ def parse_cloud(
     rows = raw.reshape(height, row_step)[:, : point_step * width]
     records = np.ascontiguousarray(rows).reshape(n_total, point_step)
     records = records.view(np.dtype((np.void, point_step))).reshape(n_total)
+    if stride > 1:
+        records = records[::stride]  # a strided view: the skipped points are never read
+        stats.n_skipped = n_total - records.shape[0]
+    n_read = records.shape[0]
 
     # One contiguous float64 column per coordinate, read in one pass over the records:
     # every test below is element-wise on these columns (no (N, 3) reductions, no per-point
@@ -443,7 +458,7 @@ def parse_cloud(
     xyz_finite = np.isfinite(x)
     xyz_finite &= np.isfinite(y)
     xyz_finite &= np.isfinite(z)
-    bad_time = np.zeros(n_total, dtype=bool)
+    bad_time = np.zeros(n_read, dtype=bool)
     times_ignored = ""
     if times is not None:
         times, bad_time, times_ignored = _check_times(times, xyz_finite, max_sweep_s)
@@ -494,7 +509,7 @@ def parse_cloud(
         intensity=sel(intensity, np.float64),
         range=sel(rng, np.float64) if extra_fields else None,
         ring=sel(ring, np.int64),
-        index=index.astype(np.int64),
+        index=index.astype(np.int64) * stride,
         time_field=t_spec.name if t_spec is not None and times is not None else "",
         time_scale=scale,
         time_offset=offset,

@@ -153,3 +153,19 @@ def test_a_cloud_parsed_ahead_is_fed_as_the_message_would_be():
     counters = ahead.pipeline.counters
     assert counters["bad_clouds"] == 1
     assert counters["bad_message" + cfg.lidar_topic.replace("/", "_")] == 1
+
+
+def test_point_stride_parses_every_nth_point_without_counting_the_rest_as_dropped():
+    rng = np.random.default_rng(5)
+    msg = _cloud(rng, 5.0)
+    scans = {}
+    for stride in (1, 3):
+        cfg = NodeConfig()
+        cfg.pipeline.method = "none"
+        cfg.pipeline.scan_matcher.point_stride = stride
+        scans[stride] = MessageFeeder(OdometryPipeline(cfg.pipeline), cfg).parse_ahead(
+            msg).result()
+    full, strided = scans[1], scans[3]
+    assert len(full.points) > 300 and strided.dropped == full.dropped == 0
+    np.testing.assert_array_equal(strided.points, full.points[::3])
+    np.testing.assert_array_equal(strided.times, full.times[::3])

@@ -86,6 +86,31 @@ def test_without_extra_fields_same_points(big: bool) -> None:
     assert vars(lean.stats) == vars(full.stats) and lean.stats.n_zero_range > 0
 
 
+@pytest.mark.parametrize("stride", [1, 2, 3, 8, 40])
+@pytest.mark.parametrize("big", [False, True])
+def test_stride_reads_every_nth_point(stride: int, big: bool) -> None:
+    """stride n: exactly the points of the whole cloud's parse at flat indices that are
+    multiples of n, with their times and indices; the others counted as skipped."""
+    msg, _, _ = ouster_cloud(height=4, width=10, zeros_for_missing=True, big=big)
+    full, strided = parse_cloud(msg), parse_cloud(msg, stride=stride)
+    read = full.index % stride == 0
+    np.testing.assert_array_equal(strided.xyz, full.xyz[read])
+    np.testing.assert_array_equal(strided.times, full.times[read])
+    np.testing.assert_array_equal(strided.index, full.index[read])
+    np.testing.assert_array_equal(strided.ring, full.ring[read])
+    s = strided.stats
+    assert s.n_total == 40 and s.n_skipped == 40 - len(range(0, 40, stride))
+    assert (s.n_skipped + s.n_kept + s.n_nonfinite + s.n_zero_range + s.n_too_close
+            + s.n_too_far + s.n_bad_time) == s.n_total
+
+
+@pytest.mark.parametrize("stride", [0, -1, 1.5, True, "2"])
+def test_stride_must_be_a_positive_integer(stride) -> None:
+    msg, _, _ = ouster_cloud()
+    with pytest.raises(ValueError, match="stride"):
+        parse_cloud(msg, stride=stride)
+
+
 def test_xyz_in_any_field_order() -> None:
     """x, y, z not adjacent or of mixed types read the same as the packed layout."""
     rng = np.random.default_rng(3)

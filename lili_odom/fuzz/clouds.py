@@ -311,8 +311,8 @@ def check(parsed) -> str:
     if parsed.times is not None and parsed.times.shape != (n,):
         return f"times shape {parsed.times.shape} for {n} points"
     s = parsed.stats
-    total = (s.n_kept + s.n_nonfinite + s.n_zero_range + s.n_too_close + s.n_too_far
-             + s.n_bad_time)
+    total = (s.n_skipped + s.n_kept + s.n_nonfinite + s.n_zero_range + s.n_too_close
+             + s.n_too_far + s.n_bad_time)
     if total != s.n_total or s.n_kept != n:
         return f"counters do not add up: {s}"
     return ""

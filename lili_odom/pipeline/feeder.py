@@ -85,8 +85,9 @@ class MessageFeeder:
     def __init__(self, pipeline: OdometryPipeline, config: NodeConfig):
         self.pipeline = pipeline
         self.config = config
-        self._parse = messages.default_cloud_parser(
-            config.pipeline.scan_matcher.min_range, config.pipeline.scan_matcher.max_range)
+        matcher = config.pipeline.scan_matcher
+        self._parse = messages.default_cloud_parser(matcher.min_range, matcher.max_range,
+                                                    stride=matcher.point_stride)
         self._tf_edges: dict[tuple[str, str], np.ndarray] = {}
         self._lidar_frame: str | None = None
         self._imu_frame: str | None = None
