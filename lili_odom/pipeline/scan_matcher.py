@@ -38,8 +38,8 @@ class ScanMatcherConfig:
         point_stride: use every n-th point of each cloud, in the cloud's own order (an
             organised Ouster cloud whose width is a multiple of n: every n-th column of each
             ring), read before anything else; 1 (default) uses every point. For a small
-            computer with a dense sensor: parsing and deskewing take about 1/n of the time,
-            and the map gets fewer points far away (``docs/performance.md``).
+            computer with a dense sensor: less to parse and to voxelise, fewer map points far
+            away (``docs/performance.md``).
         voxel_size: map voxel [m]; 0 -> ``max_range / 100`` as KISS-ICP does.
         max_points_per_voxel: map capacity per voxel.
         initial_threshold: adaptive threshold before enough motion was seen [m].
