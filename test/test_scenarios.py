@@ -179,6 +179,50 @@ def test_scenario_bag_has_the_topics_and_the_outage(tmp_path):
     assert len(stamps["/ouster/imu"]) == pytest.approx((t_out1 - t_out0 + 1.0) * 100, abs=2)
 
 
+def test_sensor_mount_reaches_tf_static_and_the_imu(tmp_path):
+    from rosbags.highlevel import AnyReader
+
+    from lili_odom.extrinsics import HUSKY_BASE_TO_SENSOR, pose_from_xyz_rpy
+    from lili_odom.messages import transforms_from_tf_msg
+
+    (sc,) = load_scenarios(["office_tilted"], measure=False)
+    x, y, z, roll, pitch, yaw = sc.sensor.mount
+    assert (pitch, yaw) == (12.0, 90.0)
+    req = scenario_request(sc, 5)
+    assert req.base_to_sensor == pytest.approx((x, y, z, 0.0, np.radians(12.0), np.radians(90.0)))
+    T_mount = pose_from_xyz_rpy(req.base_to_sensor)
+    assert np.allclose(sensors_for(req).extrinsics.base_to_sensor, T_mount)
+    # the Husky's mast without a mount, and its cache key as before a mount existed
+    plain = dataclasses.replace(sc, sensor=dataclasses.replace(sc.sensor, mount=None))
+    assert scenario_request(plain, 5).base_to_sensor is None
+    assert np.allclose(sensors_for(scenario_request(plain, 5)).extrinsics.base_to_sensor,
+                       pose_from_xyz_rpy(HUSKY_BASE_TO_SENSOR))
+    assert cache_key(scenario_request(plain, 5)) != cache_key(req)
+    assert "(own mount)" in sc.sensor.label and "(own mount)" not in plain.sensor.label
+
+    piece = dataclasses.replace(sc, start=3.0, duration=0.5)
+    bag = scenario_bag(piece, 5, resolution=(4, 32), cache_dir=tmp_path, progress=False, jobs=1)
+    edges, acc = {}, []
+    with AnyReader([bag]) as reader:
+        for conn, _, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            if conn.topic == "/tf_static":
+                edges.update({(p, c): T for p, c, T in transforms_from_tf_msg(msg)})
+            elif conn.topic == "/ouster/imu":
+                a = msg.linear_acceleration
+                acc.append((a.x, a.y, a.z))
+    assert np.allclose(edges[("base_link", "os_sensor")], T_mount, atol=1e-9)
+    # at rest on a level floor the IMU, turned with the sensor, feels gravity in its own frame
+    g_imu = T_mount[:3, :3].T @ np.array([0.0, 0.0, 9.81])
+    assert np.allclose(np.mean(acc, axis=0), g_imu, atol=0.3)
+
+
+def test_sensor_mount_must_be_six_numbers():
+    for bad in ([0.0, 0.0, 0.5], [0, 0, 0.5, 0, "12", 0], [0, 0, float("nan"), 0, 0, 0]):
+        with pytest.raises(ValueError, match="mount"):
+            SensorProfile.from_data({"model": "OS1-32", "mount": bad})
+
+
 def test_docs_table_is_current(scenarios):
     doc = (ROOT / "docs" / "scenarios.md").read_text()
     assert scenario_table(scenarios) in doc, "regenerate: lili-odom simulate scenario --list --markdown"

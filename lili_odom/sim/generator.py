@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from lili_odom.extrinsics import pose_from_xyz_rpy
 from lili_odom.sim import world as world_mod
 from lili_odom.sim.bag_writer import TOPICS, SimBagWriter
 from lili_odom.sim.imu import simulate_imu
@@ -54,7 +55,9 @@ class SimRequest:
     the world's ``trials``; ``start`` / ``duration`` [s] cut a piece of the trial (trial time).
 
     ``lidar``, ``imu``, ``wheels``: field overrides of ``LidarConfig`` (rows and cols come from
-    ``resolution``), ``ImuConfig`` and ``WheelOdomConfig``; ``None`` keeps the defaults."""
+    ``resolution``), ``ImuConfig`` and ``WheelOdomConfig``; ``None`` keeps the defaults.
+    ``base_to_sensor``: the LiDAR's mount, ``base_link`` -> ``os_sensor`` as (x, y, z [m], roll,
+    pitch, yaw [rad]); ``None`` keeps the Husky's mast mount (``HUSKY_BASE_TO_SENSOR``)."""
 
     world: str = "tunnel"
     trial: int = 1
@@ -66,6 +69,7 @@ class SimRequest:
     lidar: dict | None = None
     imu: dict | None = None
     wheels: dict | None = None
+    base_to_sensor: tuple[float, ...] | None = None
 
 
 def _override(config, overrides: dict | None, forbidden: tuple[str, ...] = ()) -> None:
@@ -85,6 +89,10 @@ def sensors_for(req: SimRequest) -> SensorSuite:
     _override(suite.lidar, req.lidar, forbidden=("rows", "cols"))
     _override(suite.imu, req.imu)
     _override(suite.wheels, req.wheels)
+    if req.base_to_sensor is not None:
+        if len(req.base_to_sensor) != 6 or not np.all(np.isfinite(req.base_to_sensor)):
+            raise ValueError(f"base_to_sensor must be 6 finite numbers, got {req.base_to_sensor!r}")
+        suite.extrinsics.base_to_sensor = pose_from_xyz_rpy(req.base_to_sensor)
     return suite
 
 
@@ -122,6 +130,8 @@ def cache_key(req: SimRequest) -> str:
     """Stable key of a request: parameters + seed + code version + world file content."""
     wpath = world_mod.world_path(req.world)
     payload = dataclasses.asdict(req)
+    if payload["base_to_sensor"] is None:  # the default mount keeps the keys it always had
+        del payload["base_to_sensor"]
     payload["world"] = Path(req.world).stem
     payload["world_sha"] = hashlib.sha256(wpath.read_bytes()).hexdigest()[:16]
     payload["code"] = code_version()

@@ -11,7 +11,7 @@ A scenario is one YAML file ``config/scenarios/<name>.yaml``::
     trial: 1                       # key of the world's trials
     start: 0.0                     # trial-time window [s]; duration null = to the end
     duration: null
-    sensor: {model: OS1-64, cols: 1024}
+    sensor: {model: OS1-64, cols: 1024}   # optional mount: [x, y, z, roll, pitch, yaw] (m, deg)
     errors: {wheel_scale_error: 0.03, slips: [{t: 20.0, duration: 0.6, gain: 0.25}]}
     seeds: [0, 1]
     ci: {start: 60.0, duration: 20.0, resolution: 32x512}   # optional short CI piece
@@ -73,7 +73,9 @@ OUSTER_FAMILIES = {
 class SensorProfile:
     """The LiDAR of a scenario: Ouster ``model`` (family-channels), ``rows`` x ``cols`` (10 Hz),
     vertical field of view [deg], range on an 80 % target ``max_range`` [m], range noise
-    ``range_sigma`` [m]. Defaults: the simulator's OS1-128 x 1024."""
+    ``range_sigma`` [m], and its ``mount`` on the robot: ``base_link`` -> ``os_sensor`` as
+    (x, y, z [m], roll, pitch, yaw [deg]), ``None`` for the Husky's mast mount (0.10 m forward,
+    0.65 m up, level). Defaults: the simulator's OS1-128 x 1024 on the mast."""
 
     model: str = "OS1-128"
     rows: int = 128
@@ -82,6 +84,7 @@ class SensorProfile:
     elevation_min_deg: float = -22.5
     max_range: float = 120.0
     range_sigma: float = 0.03
+    mount: tuple[float, ...] | None = None
 
     @classmethod
     def from_data(cls, data: dict | None) -> "SensorProfile":
@@ -97,6 +100,12 @@ class SensorProfile:
         base = dict(OUSTER_FAMILIES[m.group(1)], rows=int(m.group(2)))
         base.update(data)
         base["model"] = model
+        if base.get("mount") is not None:
+            mount = base["mount"]
+            if (not isinstance(mount, (list, tuple)) or len(mount) != 6
+                    or not all(isinstance(v, (int, float)) and np.isfinite(v) for v in mount)):
+                raise ValueError(f"sensor: mount must be [x, y, z, roll, pitch, yaw] (m, deg), got {mount!r}")
+            base["mount"] = tuple(float(v) for v in mount)
         profile = cls(**base)
         if profile.rows < 1 or profile.cols < 8 or profile.elevation_max_deg <= profile.elevation_min_deg:
             raise ValueError(f"bad sensor profile {profile}")
@@ -109,7 +118,15 @@ class SensorProfile:
     @property
     def label(self) -> str:
         """``OS1-64 x 1024`` style name."""
-        return f"{self.model.split('-')[0]}-{self.rows} x {self.cols}"
+        label = f"{self.model.split('-')[0]}-{self.rows} x {self.cols}"
+        return label if self.mount is None else label + " (own mount)"
+
+    def base_to_sensor(self) -> tuple[float, ...] | None:
+        """The mount as ``SimRequest.base_to_sensor`` (angles in radians), None for the mast."""
+        if self.mount is None:
+            return None
+        x, y, z, roll, pitch, yaw = self.mount
+        return (x, y, z, *np.deg2rad([roll, pitch, yaw]).tolist())
 
     def lidar_overrides(self) -> dict:
         """``LidarConfig`` field overrides (rows and cols travel as the request's resolution)."""
@@ -324,6 +341,7 @@ def scenario_request(scenario: Scenario, seed: int, *, ci: bool = False,
         lidar=scenario.sensor.lidar_overrides(),
         imu=dict(errors.imu) or None,
         wheels=errors.wheel_overrides() or None,
+        base_to_sensor=scenario.sensor.base_to_sensor(),
     )
 
 
