@@ -130,7 +130,7 @@ def cache_key(req: SimRequest) -> str:
     """Stable key of a request: parameters + seed + code version + world file content."""
     wpath = world_mod.world_path(req.world)
     payload = dataclasses.asdict(req)
-    if payload["base_to_sensor"] is None:  # the default mount keeps the keys it always had
+    if payload["base_to_sensor"] is None:  # no mount: the same payload as before the field
         del payload["base_to_sensor"]
     payload["world"] = Path(req.world).stem
     payload["world_sha"] = hashlib.sha256(wpath.read_bytes()).hexdigest()[:16]

@@ -117,7 +117,7 @@ class SensorProfile:
 
     @property
     def label(self) -> str:
-        """``OS1-64 x 1024`` style name."""
+        """``OS1-64 x 1024`` style name; ``(own mount)`` appended when the scenario gives one."""
         label = f"{self.model.split('-')[0]}-{self.rows} x {self.cols}"
         return label if self.mount is None else label + " (own mount)"
 
