@@ -200,7 +200,7 @@ def test_sensor_mount_reaches_tf_static_and_the_imu(tmp_path):
     assert cache_key(scenario_request(plain, 5)) != cache_key(req)
     assert "(own mount)" in sc.sensor.label and "(own mount)" not in plain.sensor.label
 
-    piece = dataclasses.replace(sc, start=3.0, duration=0.5)
+    piece = dataclasses.replace(sc, start=0.5, duration=1.0)  # inside the 2 s standstill
     bag = scenario_bag(piece, 5, resolution=(4, 32), cache_dir=tmp_path, progress=False, jobs=1)
     edges, acc = {}, []
     with AnyReader([bag]) as reader:
